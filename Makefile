@@ -1,0 +1,69 @@
+# The commands people type. `make demo` and `make test` each set up everything they
+# need on a fresh Debian 12 machine: system packages, a virtual environment in .venv,
+# and an incremental build in build/.
+
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+DATA ?= ../shared/data
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+PYTAG := $(shell $(PYTHON) -c "import sys; print(f'cp{sys.version_info[0]}{sys.version_info[1]}')")
+BUILD_DIR = $(firstword $(wildcard build/$(PYTAG)-*))
+
+APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev \
+	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev
+PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
+PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" ruff
+
+.PHONY: all demo test test-cpp test-python install system-deps venv bench format lint clean
+
+all: install
+
+demo: install
+	$(VENV)/bin/spectral-vs demo --data $(DATA)
+
+test: install test-cpp test-python
+
+test-cpp:
+	$(VENV)/bin/ctest --test-dir $(BUILD_DIR) --output-on-failure
+
+test-python:
+	SPECTRAL_VS_DATA=$(DATA) $(PY) -m pytest
+
+# Installs only the Debian packages that are missing, so a second run is instant.
+system-deps:
+	@missing=$$(for p in $(APT_PACKAGES); do \
+		dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		echo "Installing Debian packages:" $$missing; \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+$(VENV)/.stamp: Makefile
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q $(PIP_BUILD) $(PIP_RUNTIME)
+	touch $@
+
+venv: $(VENV)/.stamp
+
+# The build directory build/<wheel tag> is kept between runs: a rebuild with nothing
+# changed only re-links nothing and re-packs the wheel.
+install: system-deps venv
+	$(PY) -m pip install -q --no-build-isolation --no-deps \
+		-Ccmake.define.SPECTRAL_VS_BUILD_TESTS=ON .
+
+bench: install
+	$(PY) benchmarks/translation_benchmark.py --data $(DATA)
+
+format:
+	$(VENV)/bin/ruff format python tests benchmarks
+	find cpp bindings tests/cpp -name '*.[ch]pp' | xargs clang-format -i
+
+lint:
+	$(VENV)/bin/ruff check python tests benchmarks
+	$(VENV)/bin/ruff format --check python tests benchmarks
+
+clean:
+	rm -rf build

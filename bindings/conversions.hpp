@@ -1,0 +1,66 @@
+#pragma once
+// numpy <-> Eigen conversions with the checks a Python user needs: dtype, shape and
+// finiteness errors name the argument, as ValueError.
+
+#include <spectral_vs/representation/point_cloud.hpp>
+
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <string>
+
+namespace spectral_vs::python {
+
+namespace py = pybind11;
+
+/// An (N, 3) array of any floating dtype and memory layout, copied to float64 rows.
+/// Integer, boolean and object arrays are refused: silently casting them hides bugs.
+inline Points to_points(const py::handle& object, const char* argument) {
+  auto array = py::array::ensure(object);
+  if (!array) throw py::value_error(std::string(argument) + " must be an array-like of floats");
+  const char kind = array.dtype().kind();
+  if (kind != 'f') {
+    throw py::value_error(std::string(argument) + " must have a floating dtype (float32 or float64), got " +
+                          std::string(py::str(array.dtype())));
+  }
+  if (array.ndim() != 2 || array.shape(1) != 3) {
+    std::string shape = "(";
+    for (py::ssize_t i = 0; i < array.ndim(); ++i) shape += (i ? ", " : "") + std::to_string(array.shape(i));
+    throw py::value_error(std::string(argument) + " must have shape (N, 3), got " + shape + ")");
+  }
+  auto doubles = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(array);
+  Points out(array.shape(0), 3);
+  std::copy(doubles.data(), doubles.data() + doubles.size(), out.data());
+  return out;
+}
+
+/// A read-only numpy view of `matrix`, kept alive by `owner`.
+template <typename Matrix>
+py::array readonly_view(const Matrix& matrix, py::handle owner) {
+  using Scalar = typename Matrix::Scalar;
+  static_assert(Matrix::IsRowMajor || Matrix::ColsAtCompileTime == 1, "row-major expected");
+  py::array_t<Scalar> view({static_cast<py::ssize_t>(matrix.rows()), static_cast<py::ssize_t>(matrix.cols())},
+                           {static_cast<py::ssize_t>(sizeof(Scalar) * matrix.cols()), static_cast<py::ssize_t>(sizeof(Scalar))},
+                           matrix.data(), owner);
+  view.attr("setflags")(py::arg("write") = false);
+  return std::move(view);
+}
+
+/// A 4 x 4 float array checked to be a rigid transform.
+inline Transform to_transform(const py::handle& object, const char* argument) {
+  auto array = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(object);
+  if (!array || array.ndim() != 2 || array.shape(0) != 4 || array.shape(1) != 4) {
+    throw py::value_error(std::string(argument) + " must be a (4, 4) array");
+  }
+  Transform T;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) T(r, c) = array.at(r, c);
+  require_rigid_transform(T, argument);
+  return T;
+}
+
+void define_representation(py::module_& m);
+void define_translation(py::module_& m);
+
+}  // namespace spectral_vs::python

@@ -1,0 +1,9 @@
+#include "conversions.hpp"
+
+namespace py = pybind11;
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "spectral_vs compiled core: representation, translation and rotation estimation.";
+  spectral_vs::python::define_representation(m);
+  spectral_vs::python::define_translation(m);
+}

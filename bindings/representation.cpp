@@ -1,0 +1,243 @@
+// Bindings of the representation (paper, section II-A): clouds, files, preprocessing,
+// voxel grids and the EGI.
+#include "conversions.hpp"
+
+#include <spectral_vs/representation/cloud_io.hpp>
+#include <spectral_vs/representation/egi.hpp>
+#include <spectral_vs/representation/preprocessing.hpp>
+#include <spectral_vs/representation/voxel_grid.hpp>
+
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <filesystem>
+#include <sstream>
+
+namespace spectral_vs::python {
+
+namespace {
+
+PointCloud make_cloud(const py::handle& points, const py::handle& normals, bool drop_non_finite) {
+  Points p = to_points(points, "points");
+  Points n = normals.is_none() ? Points() : to_points(normals, "normals");
+  if (drop_non_finite) {
+    py::gil_scoped_release release;
+    remove_non_finite(p, n.rows() ? &n : nullptr);
+  }
+  return PointCloud(std::move(p), std::move(n));
+}
+
+NormalOrientation parse_orientation(const std::string& name) {
+  if (name == "toward_viewpoint") return NormalOrientation::toward_viewpoint;
+  if (name == "outward") return NormalOrientation::outward;
+  throw py::value_error("orientation must be 'toward_viewpoint' or 'outward', got '" + name + "'");
+}
+
+Occupancy parse_occupancy(const std::string& name) {
+  if (name == "binary") return Occupancy::binary;
+  if (name == "count") return Occupancy::count;
+  if (name == "trilinear") return Occupancy::trilinear;
+  throw py::value_error("occupancy must be 'binary', 'count' or 'trilinear', got '" + name + "'");
+}
+
+PcdEncoding parse_encoding(const std::string& name) {
+  if (name == "ascii") return PcdEncoding::ascii;
+  if (name == "binary") return PcdEncoding::binary;
+  if (name == "binary_compressed") return PcdEncoding::binary_compressed;
+  throw py::value_error("encoding must be 'ascii', 'binary' or 'binary_compressed', got '" + name + "'");
+}
+
+void require_file(const std::filesystem::path& path) {
+  std::error_code error;
+  if (!std::filesystem::exists(path, error)) {
+    PyErr_SetString(PyExc_FileNotFoundError, ("path: no such file: " + path.string()).c_str());
+    throw py::error_already_set();
+  }
+}
+
+Points normals_of(const py::handle& object) {
+  if (py::isinstance<PointCloud>(object)) {
+    const auto& cloud = object.cast<const PointCloud&>();
+    require_normals(cloud, "cloud");
+    return cloud.normals();
+  }
+  return to_points(object, "normals");
+}
+
+py::array grid_values(const VoxelGrid& grid, py::handle owner) {
+  const auto& d = grid.spec.dims;
+  const auto f = static_cast<py::ssize_t>(sizeof(float));
+  py::array_t<float> view({py::ssize_t(d.x()), py::ssize_t(d.y()), py::ssize_t(d.z())},
+                          {f * d.y() * d.z(), f * d.z(), f}, grid.values.data(), owner);
+  view.attr("setflags")(py::arg("write") = false);
+  return std::move(view);
+}
+
+}  // namespace
+
+void define_representation(py::module_& m) {
+  py::class_<PointCloud>(m, "PointCloud", R"doc(
+Points in metres with optional unit surface normals.
+
+Parameters
+----------
+points : array_like, shape (N, 3), float
+    Coordinates in metres. Every entry must be finite unless ``drop_non_finite``.
+normals : array_like, shape (N, 3), float, optional
+    One normal per point; rescaled to unit length. Zero-length rows are refused.
+drop_non_finite : bool
+    Drop rows with a non-finite coordinate or normal (as from a depth sensor)
+    instead of raising ``ValueError``.
+)doc")
+      .def(py::init(&make_cloud), py::arg("points"), py::arg("normals") = py::none(), py::kw_only(),
+           py::arg("drop_non_finite") = false)
+      .def("__len__", &PointCloud::size)
+      .def_property_readonly("points", [](py::object self) {
+        return readonly_view(self.cast<const PointCloud&>().points(), self);
+      }, "(N, 3) float64 read-only view of the points, metres.")
+      .def_property_readonly("normals", [](py::object self) -> py::object {
+        const auto& cloud = self.cast<const PointCloud&>();
+        if (!cloud.has_normals()) return py::none();
+        return readonly_view(cloud.normals(), self);
+      }, "(N, 3) float64 read-only view of the unit normals, or None.")
+      .def_property_readonly("has_normals", &PointCloud::has_normals)
+      .def("centroid", &PointCloud::centroid, "Mean of the points, metres.")
+      .def("transformed", [](const PointCloud& cloud, const py::handle& T) {
+        return cloud.transformed(to_transform(T, "T_target_source"));
+      }, py::arg("T_target_source"), "The cloud moved by a 4x4 rigid transform (normals rotated).")
+      .def("__repr__", [](const PointCloud& cloud) {
+        std::ostringstream out;
+        out << "PointCloud(" << cloud.size() << " points, " << (cloud.has_normals() ? "with" : "no")
+            << " normals)";
+        return out.str();
+      });
+
+  py::class_<CloudFileInfo>(m, "CloudFileInfo", "What a point cloud file held before loading.")
+      .def_readonly("width", &CloudFileInfo::width)
+      .def_readonly("height", &CloudFileInfo::height)
+      .def_readonly("points_in_file", &CloudFileInfo::points_in_file)
+      .def_readonly("non_finite_dropped", &CloudFileInfo::non_finite_dropped)
+      .def_readonly("had_normals", &CloudFileInfo::had_normals)
+      .def("__repr__", [](const CloudFileInfo& i) {
+        std::ostringstream out;
+        out << "CloudFileInfo(width=" << i.width << ", height=" << i.height << ", points_in_file="
+            << i.points_in_file << ", non_finite_dropped=" << i.non_finite_dropped
+            << ", had_normals=" << (i.had_normals ? "True" : "False") << ")";
+        return out.str();
+      });
+
+  m.def("load_cloud_with_info", [](const std::filesystem::path& path) {
+    require_file(path);
+    CloudFileInfo info;
+    PointCloud cloud;
+    {
+      py::gil_scoped_release release;
+      cloud = load_cloud(path.string(), &info);
+    }
+    return py::make_tuple(std::move(cloud), info);
+  }, py::arg("path"), "Load a .pcd or .ply file; return (PointCloud, CloudFileInfo).");
+
+  m.def("save_cloud", [](const std::filesystem::path& path, const PointCloud& cloud,
+                         const std::string& encoding) {
+    const PcdEncoding parsed = parse_encoding(encoding);
+    py::gil_scoped_release release;
+    save_cloud(path.string(), cloud, parsed);
+  }, py::arg("path"), py::arg("cloud"), py::arg("encoding") = "binary_compressed",
+        "Save to .pcd (encoding: ascii, binary, binary_compressed) or .ply, as float32.");
+
+  m.def("voxel_downsample", &voxel_downsample, py::arg("cloud"), py::arg("voxel_size"),
+        py::call_guard<py::gil_scoped_release>(),
+        "Replace the points of each voxel_size cube (metres) by their centroid; normals averaged.");
+
+  m.def("estimate_normals", [](const PointCloud& cloud, double radius, int k_neighbors,
+                               const Eigen::Vector3d& viewpoint, const std::string& orientation,
+                               int threads) {
+    NormalEstimationParams params;
+    params.radius = radius;
+    params.k_neighbors = k_neighbors;
+    params.viewpoint = viewpoint;
+    params.orientation = parse_orientation(orientation);
+    params.threads = threads;
+    py::gil_scoped_release release;
+    return estimate_normals(cloud, params);
+  }, py::arg("cloud"), py::arg("radius") = 0.015, py::arg("k_neighbors") = 0,
+        py::arg("viewpoint") = Eigen::Vector3d::Zero(), py::arg("orientation") = "toward_viewpoint",
+        py::arg("threads") = 1,
+        "Plane-fit normals (PCL), oriented toward `viewpoint` or 'outward' from the centroid.");
+
+  py::class_<GridSpec>(m, "GridSpec", "Origin (m), resolution (m) and dims (voxels) of a voxel grid.")
+      .def(py::init([](const Eigen::Vector3d& origin, double resolution, const Eigen::Vector3i& dims) {
+             GridSpec spec;
+             spec.origin = origin;
+             spec.resolution = resolution;
+             spec.dims = dims;
+             return spec;
+           }), py::arg("origin"), py::arg("resolution"), py::arg("dims"))
+      .def_readonly("origin", &GridSpec::origin)
+      .def_readonly("resolution", &GridSpec::resolution)
+      .def_readonly("dims", &GridSpec::dims)
+      .def_property_readonly("voxel_count", &GridSpec::voxel_count)
+      .def("index_of", &GridSpec::index_of, py::arg("point"), "floor((point - origin) / resolution).")
+      .def("__repr__", [](const GridSpec& s) {
+        std::ostringstream out;
+        out << "GridSpec(origin=[" << s.origin.transpose() << "], resolution=" << s.resolution
+            << ", dims=[" << s.dims.transpose() << "])";
+        return out.str();
+      });
+
+  m.def("fft_friendly_size", &fft_friendly_size, py::arg("n"),
+        "Smallest n' >= n with prime factors in {2, 3, 5, 7}.");
+
+  m.def("make_grid_spec", [](const PointCloud& a, const PointCloud& b, double resolution,
+                             std::size_t max_voxels) {
+    return make_grid_spec(bounding_box(a), bounding_box(b), resolution, GridLimits{max_voxels});
+  }, py::arg("cloud_a"), py::arg("cloud_b"), py::arg("resolution"),
+        py::arg("max_voxels") = GridLimits{}.max_voxels,
+        "A grid holding both clouds in which their shift cannot alias; refuses grids over max_voxels.");
+
+  py::class_<VoxelGrid>(m, "VoxelGrid", "Voxel values on a GridSpec (eq. 1-2).")
+      .def_readonly("spec", &VoxelGrid::spec)
+      .def_property_readonly("values", [](py::object self) {
+        return grid_values(self.cast<const VoxelGrid&>(), self);
+      }, "(nx, ny, nz) float32 read-only view of the voxel values.")
+      .def_readonly("points_outside", &VoxelGrid::points_outside)
+      .def_readonly("occupied_min", &VoxelGrid::occupied_min)
+      .def_readonly("occupied_max", &VoxelGrid::occupied_max)
+      .def("__repr__", [](const VoxelGrid& g) {
+        std::ostringstream out;
+        out << "VoxelGrid(dims=[" << g.spec.dims.transpose() << "], resolution=" << g.spec.resolution
+            << ", points_outside=" << g.points_outside << ")";
+        return out.str();
+      });
+
+  m.def("voxelize", [](const PointCloud& cloud, const GridSpec& spec, const std::string& occupancy,
+                       std::size_t max_voxels) {
+    const Occupancy parsed = parse_occupancy(occupancy);
+    py::gil_scoped_release release;
+    return voxelize(cloud, spec, parsed, GridLimits{max_voxels});
+  }, py::arg("cloud"), py::arg("spec"), py::arg("occupancy") = "binary",
+        py::arg("max_voxels") = GridLimits{}.max_voxels,
+        "Voxel grid of a cloud: 'binary' (eq. 2), 'count' or 'trilinear' occupancy.");
+
+  m.def("egi", [](const py::handle& cloud_or_normals, int bandwidth,
+                  std::optional<Eigen::VectorXd> weights) {
+    const Points normals = normals_of(cloud_or_normals);
+    return egi_histogram(normals, bandwidth, weights ? &*weights : nullptr);
+  }, py::arg("cloud_or_normals"), py::arg("bandwidth"), py::arg("weights") = py::none(),
+        "EGI of eq. (4): (2B, 2B) histogram of normals indexed [j, k] at theta_j, phi_k.");
+
+  m.def("egi_cell", &egi_cell, py::arg("normal"), py::arg("bandwidth"),
+        "(j, k) of the grid node nearest to a unit normal.");
+
+  m.def("sphere_grid", [](int bandwidth) {
+    require_bandwidth(bandwidth);
+    Eigen::VectorXd theta(2 * bandwidth), phi(2 * bandwidth);
+    for (int i = 0; i < 2 * bandwidth; ++i) {
+      theta[i] = grid_theta(i, bandwidth);
+      phi[i] = grid_phi(i, bandwidth);
+    }
+    return py::make_tuple(theta, phi);
+  }, py::arg("bandwidth"), "(theta_j, phi_k) of the 2B x 2B grid, radians.");
+}
+
+}  // namespace spectral_vs::python

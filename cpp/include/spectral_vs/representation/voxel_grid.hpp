@@ -1,0 +1,81 @@
+#pragma once
+/// @file voxel_grid.hpp
+/// The voxel grid f_t of eq. (1)-(2): the representation used for translation.
+
+#include <spectral_vs/representation/point_cloud.hpp>
+
+#include <Eigen/Geometry>
+#include <cstddef>
+#include <vector>
+
+namespace spectral_vs {
+
+/// Where a grid lies and how fine it is. Voxel (i, j, k) covers
+/// origin + r * [i, i+1) x [j, j+1) x [k, k+1): the index of a point p is
+/// floor((p - origin) / r). (The paper's integer division truncates toward zero,
+/// which makes the voxel around zero twice as wide; floor does not.)
+struct GridSpec {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< Corner of voxel (0, 0, 0), metres.
+  double resolution = 0.008;                         ///< Voxel edge r, metres.
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();    ///< Voxels along x, y, z.
+
+  std::size_t voxel_count() const;
+  /// floor((p - origin) / resolution), possibly outside [0, dims).
+  Eigen::Vector3i index_of(const Eigen::Vector3d& p) const;
+  bool contains(const Eigen::Vector3i& index) const;
+};
+
+/// Memory guard for every grid the library allocates.
+struct GridLimits {
+  std::size_t max_voxels = std::size_t{512} * 512 * 512;  ///< Refuse grids with more voxels.
+};
+
+/// Smallest n' >= n whose prime factors are all in {2, 3, 5, 7} (sizes FFTW is fast on).
+int fft_friendly_size(int n);
+
+/// A grid holding two clouds' bounding boxes in which the circular correlation of
+/// their voxel grids equals the linear one: along each axis the grid has at least
+/// extent_a + extent_b + 1 voxels and covers the union of both boxes. The origin is
+/// snapped to a multiple of `resolution` so that grids of different clouds align.
+/// @throws std::invalid_argument for an empty or non-finite box, a non-finite or
+///         non-positive resolution, or a grid over `limits.max_voxels` (the message
+///         gives the dimensions and the limit).
+GridSpec make_grid_spec(const Eigen::AlignedBox3d& box_a, const Eigen::AlignedBox3d& box_b,
+                        double resolution, const GridLimits& limits = {});
+
+/// Axis-aligned bounding box of a cloud's points. @throws if empty.
+Eigen::AlignedBox3d bounding_box(const PointCloud& cloud);
+
+/// What a voxel holds.
+enum class Occupancy {
+  binary,     ///< 1 if at least one point falls in the voxel (eq. 2, the paper's choice).
+  count,      ///< Number of points in the voxel.
+  trilinear,  ///< Each point spread over the 8 nearest voxel centres with trilinear weights:
+              ///< a grid that moves smoothly with sub-voxel motion.
+};
+
+/// Dense grid of voxel values, x-major: value(i, j, k) = values[(i * ny + j) * nz + k].
+struct VoxelGrid {
+  GridSpec spec;
+  std::vector<float> values;
+  std::size_t points_outside = 0;  ///< Points that fell outside the grid and were ignored.
+  /// Smallest and largest index of a non-zero voxel per axis (min > max when empty).
+  Eigen::Vector3i occupied_min = Eigen::Vector3i::Constant(1);
+  Eigen::Vector3i occupied_max = Eigen::Vector3i::Constant(0);
+
+  bool empty() const { return (occupied_min.array() > occupied_max.array()).any(); }
+  float at(int i, int j, int k) const {
+    return values[(static_cast<std::size_t>(i) * spec.dims.y() + j) * spec.dims.z() + k];
+  }
+};
+
+/// Voxelizes `points` into `grid` (re-using its memory when the spec is unchanged).
+/// @throws std::invalid_argument if the spec is invalid or over `limits`.
+void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy,
+                   VoxelGrid& grid, const GridLimits& limits = {});
+
+/// Voxelizes a cloud. @throws std::invalid_argument if the cloud is empty.
+VoxelGrid voxelize(const PointCloud& cloud, const GridSpec& spec,
+                   Occupancy occupancy = Occupancy::binary, const GridLimits& limits = {});
+
+}  // namespace spectral_vs

@@ -1,0 +1,70 @@
+#pragma once
+/// @file phase_correlation.hpp
+/// Translation by 3D phase correlation of voxel grids (paper, section II-B, eq. 5-9).
+
+#include <spectral_vs/representation/voxel_grid.hpp>
+
+#include <Eigen/Core>
+#include <memory>
+
+namespace spectral_vs {
+
+/// Settings of the phase correlation.
+struct PhaseCorrelationParams {
+  /// Refine the integer peak by a least-squares fit of the cross-power spectrum's
+  /// phase plane over low frequencies (|f| < subvoxel_band cycles per voxel).
+  bool subvoxel = true;
+  double subvoxel_band = 0.25;  ///< Frequency band of the fit, cycles per voxel, in (0, 0.5].
+  int threads = 1;              ///< FFTW threads.
+};
+
+/// Translation that moves the moving grid onto the target: target(x) ~ moving(x - shift).
+struct TranslationEstimate {
+  Eigen::Vector3d shift_voxels = Eigen::Vector3d::Zero();  ///< Refined shift, voxels.
+  Eigen::Vector3i peak_voxels = Eigen::Vector3i::Zero();   ///< Integer argmax, voxels (unfolded).
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();         ///< shift_voxels * resolution, metres.
+  /// Height of the normalised correlation at the integer peak, in [0, 1]: 1 for two
+  /// grids that are exact shifts of each other, near 0 when nothing matches.
+  double peak = 0.0;
+};
+
+/// Phase correlation against a fixed target on a fixed grid. Owns the FFTW plans
+/// (real-to-complex and back, made once) and the target's spectrum, so each
+/// `estimate` costs one forward and one inverse FFT. Not safe to call from two
+/// threads at once; distinct objects are independent.
+class PhaseCorrelation {
+public:
+  /// @throws std::invalid_argument for an invalid spec or params.
+  explicit PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationParams& params = {});
+  ~PhaseCorrelation();
+  PhaseCorrelation(PhaseCorrelation&&) noexcept;
+  PhaseCorrelation& operator=(PhaseCorrelation&&) noexcept;
+
+  /// Caches the spectrum of `target`. @throws if its spec differs or it is empty.
+  void set_target(const VoxelGrid& target);
+  bool has_target() const;
+
+  /// The shift of `moving` onto the cached target. Only shifts for which the two
+  /// grids' occupied boxes overlap are considered, so the wrap-around of the
+  /// circular correlation is unfolded without ambiguity.
+  /// @throws std::invalid_argument if no target is set, the spec differs, or
+  ///         `moving` is empty.
+  TranslationEstimate estimate(const VoxelGrid& moving);
+
+  const GridSpec& spec() const;
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// One-shot phase correlation of two grids on the same spec (plans made per call).
+TranslationEstimate phase_correlation(const VoxelGrid& moving, const VoxelGrid& target,
+                                      const PhaseCorrelationParams& params = {});
+
+/// Translation cost J_t of eq. (9): 0.5 * sum_x (target(x) - moving(x - shift))^2 for
+/// an integer `shift` in voxels; voxels shifted out of the grid count as empty.
+double translation_cost(const VoxelGrid& moving, const VoxelGrid& target,
+                        const Eigen::Vector3i& shift);
+
+}  // namespace spectral_vs

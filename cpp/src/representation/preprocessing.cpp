@@ -1,0 +1,126 @@
+#include <spectral_vs/representation/preprocessing.hpp>
+
+#include "common/checks.hpp"
+
+#include <pcl/features/normal_3d_omp.h>
+#include <pcl/filters/voxel_grid.h>
+#include <pcl/point_types.h>
+#include <pcl/search/kdtree.h>
+
+#include <cmath>
+#include <limits>
+
+namespace spectral_vs {
+
+using detail::fail;
+
+namespace {
+
+pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud) {
+  auto out = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
+  out->resize(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    auto& p = (*out)[i];
+    p.getVector3fMap() = cloud.points().row(Eigen::Index(i)).transpose().cast<float>();
+    if (cloud.has_normals()) {
+      p.getNormalVector3fMap() = cloud.normals().row(Eigen::Index(i)).transpose().cast<float>();
+    } else {
+      p.getNormalVector3fMap().setZero();
+    }
+    p.curvature = 0.0f;
+  }
+  return out;
+}
+
+// PCL's VoxelGrid silently returns its input when the voxel indices would overflow
+// a 32-bit integer; refuse such a call instead of returning a wrong answer.
+void check_voxel_count(const PointCloud& cloud, double voxel_size) {
+  const Eigen::Vector3d extent = cloud.points().colwise().maxCoeff() -
+                                 cloud.points().colwise().minCoeff();
+  double voxels = 1.0;
+  for (int axis = 0; axis < 3; ++axis) voxels *= std::floor(extent[axis] / voxel_size) + 1.0;
+  const double limit = static_cast<double>(std::numeric_limits<std::int32_t>::max());
+  if (voxels > limit) {
+    fail("voxel_size: ", voxel_size, " m is too small for a cloud of extent ", extent.transpose(),
+         " m: ", voxels, " voxels exceed the limit of ", limit);
+  }
+}
+
+}  // namespace
+
+PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size) {
+  require_non_empty(cloud, "cloud");
+  detail::require_positive_finite(voxel_size, "voxel_size");
+  check_voxel_count(cloud, voxel_size);
+
+  pcl::VoxelGrid<pcl::PointNormal> filter;
+  filter.setInputCloud(to_pcl(cloud));
+  const auto leaf = static_cast<float>(voxel_size);
+  filter.setLeafSize(leaf, leaf, leaf);
+  filter.setDownsampleAllData(true);
+  pcl::PointCloud<pcl::PointNormal> reduced;
+  filter.filter(reduced);
+
+  Points points(static_cast<Eigen::Index>(reduced.size()), 3);
+  Points normals(cloud.has_normals() ? points.rows() : 0, 3);
+  Eigen::Index kept = 0;
+  for (const auto& p : reduced) {
+    if (cloud.has_normals()) {
+      const Eigen::Vector3d n = p.getNormalVector3fMap().cast<double>();
+      if (!(n.norm() > 1e-6)) continue;  // opposite normals cancelled: no direction left
+      normals.row(kept) = n.normalized().transpose();
+    }
+    points.row(kept) = p.getVector3fMap().cast<double>().transpose();
+    ++kept;
+  }
+  points.conservativeResize(kept, Eigen::NoChange);
+  if (cloud.has_normals()) normals.conservativeResize(kept, Eigen::NoChange);
+  return PointCloud(std::move(points), std::move(normals));
+}
+
+PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParams& params) {
+  require_non_empty(cloud, "cloud");
+  if (params.k_neighbors < 0) fail("k_neighbors must be >= 0, got ", params.k_neighbors);
+  if (params.k_neighbors == 0) detail::require_positive_finite(params.radius, "radius");
+  if (!params.viewpoint.allFinite()) fail("viewpoint must be finite");
+  if (params.threads < 1) fail("threads must be >= 1, got ", params.threads);
+
+  auto input = to_pcl(cloud);
+  pcl::NormalEstimationOMP<pcl::PointNormal, pcl::Normal> estimator(
+      static_cast<unsigned int>(params.threads));
+  estimator.setInputCloud(input);
+  estimator.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointNormal>>());
+  if (params.k_neighbors > 0) {
+    estimator.setKSearch(params.k_neighbors);
+  } else {
+    estimator.setRadiusSearch(params.radius);
+  }
+  pcl::PointCloud<pcl::Normal> estimated;
+  estimator.compute(estimated);
+
+  const Eigen::Vector3d centroid = cloud.centroid();
+  Points points(static_cast<Eigen::Index>(cloud.size()), 3);
+  Points normals(points.rows(), 3);
+  Eigen::Index kept = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    Eigen::Vector3d n = estimated[i].getNormalVector3fMap().cast<double>();
+    if (!n.allFinite() || n.norm() < 1e-6) continue;
+    const Eigen::Vector3d p = cloud.points().row(Eigen::Index(i)).transpose();
+    const Eigen::Vector3d reference = params.orientation == NormalOrientation::toward_viewpoint
+                                          ? Eigen::Vector3d(params.viewpoint - p)
+                                          : Eigen::Vector3d(p - centroid);
+    if (n.dot(reference) < 0.0) n = -n;
+    points.row(kept) = p.transpose();
+    normals.row(kept) = n.normalized().transpose();
+    ++kept;
+  }
+  if (kept == 0) {
+    fail("radius/k_neighbors: no point has enough neighbours (>= 3) for a normal; "
+         "radius = ", params.radius, " m, k_neighbors = ", params.k_neighbors);
+  }
+  points.conservativeResize(kept, Eigen::NoChange);
+  normals.conservativeResize(kept, Eigen::NoChange);
+  return PointCloud(std::move(points), std::move(normals));
+}
+
+}  // namespace spectral_vs

@@ -1,0 +1,73 @@
+"""Correspondence-free point cloud registration and 3D visual servoing in the spectral domain.
+
+The representation (voxel grids, Extended Gaussian Images) and the translation
+estimation (3D phase correlation) of "3D Spectral Domain Registration-Based Visual
+Servoing" run in a compiled C++ core; this package re-exports them.
+"""
+
+from __future__ import annotations
+
+import os
+
+from spectral_vs._core import (
+    CloudFileInfo,
+    GridSpec,
+    PhaseCorrelation,
+    PointCloud,
+    TranslationEstimate,
+    VoxelGrid,
+    egi,
+    egi_cell,
+    estimate_normals,
+    fft_friendly_size,
+    load_cloud_with_info,
+    make_grid_spec,
+    phase_correlation,
+    save_cloud,
+    sphere_grid,
+    translation_cost,
+    voxel_downsample,
+    voxelize,
+)
+
+__version__ = "0.1.0"
+
+
+def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
+    """Load a ``.pcd`` or ``.ply`` file as a :class:`PointCloud`.
+
+    Organized clouds are flattened and points with a non-finite coordinate are
+    dropped; :func:`load_cloud_with_info` also reports how many.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not a point cloud, or has no finite point.
+    """
+    cloud, _ = load_cloud_with_info(path)
+    return cloud
+
+
+__all__ = [
+    "CloudFileInfo",
+    "GridSpec",
+    "PhaseCorrelation",
+    "PointCloud",
+    "TranslationEstimate",
+    "VoxelGrid",
+    "egi",
+    "egi_cell",
+    "estimate_normals",
+    "fft_friendly_size",
+    "load_cloud",
+    "load_cloud_with_info",
+    "make_grid_spec",
+    "phase_correlation",
+    "save_cloud",
+    "sphere_grid",
+    "translation_cost",
+    "voxel_downsample",
+    "voxelize",
+]

@@ -1,0 +1,319 @@
+#include <spectral_vs/representation/cloud_io.hpp>
+#include <spectral_vs/representation/egi.hpp>
+#include <spectral_vs/representation/preprocessing.hpp>
+#include <spectral_vs/representation/voxel_grid.hpp>
+
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+namespace spectral_vs {
+namespace {
+
+std::string temp_file(const std::string& name) {
+  return (std::filesystem::temp_directory_path() / ("spectral_vs_test_" + name)).string();
+}
+
+TEST(PointCloud, NormalsAreStoredUnitLength) {
+  Points p(2, 3), n(2, 3);
+  p << 0, 0, 0, 1, 2, 3;
+  n << 0, 0, 2, 3, 4, 0;
+  const PointCloud cloud(p, n);
+  EXPECT_NEAR(cloud.normals().row(0).norm(), 1.0, 1e-15);
+  EXPECT_NEAR(cloud.normals()(1, 0), 0.6, 1e-15);
+  EXPECT_EQ(cloud.size(), 2u);
+  EXPECT_TRUE(cloud.has_normals());
+}
+
+TEST(PointCloud, RefusesNonFiniteRowsAndMismatchedNormals) {
+  Points p(3, 3);
+  p << 0, 0, 0, NAN, 0, 0, 1, 1, 1;
+  EXPECT_THROW(PointCloud{p}, std::invalid_argument);
+  Points good = Points::Zero(3, 3);
+  EXPECT_THROW(PointCloud(good, Points::Ones(2, 3)), std::invalid_argument);
+  EXPECT_THROW(PointCloud(good, Points::Zero(3, 3)), std::invalid_argument);
+}
+
+TEST(PointCloud, RemoveNonFiniteKeepsFiniteRowsInOrder) {
+  Points p(4, 3), n(4, 3);
+  p << 0, 0, 0, NAN, 0, 0, 1, 1, 1, 2, 2, 2;
+  n << 0, 0, 1, 0, 0, 1, 0, 0, 0, 1, 0, 0;  // row 2 has a zero normal
+  EXPECT_EQ(remove_non_finite(p, &n), 2u);
+  ASSERT_EQ(p.rows(), 2);
+  EXPECT_EQ(p(1, 0), 2.0);
+  EXPECT_EQ(n(1, 0), 1.0);
+}
+
+TEST(PointCloud, TransformedRotatesNormalsAndMovesPoints) {
+  Points p(1, 3), n(1, 3);
+  p << 1, 0, 0;
+  n << 1, 0, 0;
+  Transform T = Transform::Identity();
+  T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.topRightCorner<3, 1>() << 0, 0, 1;
+  const PointCloud moved = PointCloud(p, n).transformed(T);
+  EXPECT_NEAR((moved.points().row(0) - Eigen::RowVector3d(0, 1, 1)).norm(), 0.0, 1e-15);
+  EXPECT_NEAR((moved.normals().row(0) - Eigen::RowVector3d(0, 1, 0)).norm(), 0.0, 1e-15);
+}
+
+TEST(RigidTransform, RefusesReflectionsScalingAndBadLastRow) {
+  Transform T = Transform::Identity();
+  EXPECT_NO_THROW(require_rigid_transform(T, "T"));
+  T(0, 0) = -1.0;
+  EXPECT_THROW(require_rigid_transform(T, "T"), std::invalid_argument);
+  T = Transform::Identity() * 2.0;
+  T(3, 3) = 1.0;
+  EXPECT_THROW(require_rigid_transform(T, "T"), std::invalid_argument);
+  T = Transform::Identity();
+  T(3, 0) = 1.0;
+  EXPECT_THROW(require_rigid_transform(T, "T"), std::invalid_argument);
+}
+
+TEST(CloudIo, LoadsTheMilkCartonScan) {
+  CloudFileInfo info;
+  const PointCloud milk = load_cloud(test::data_path("milk.pcd"), &info);
+  EXPECT_EQ(milk.size() + info.non_finite_dropped, info.points_in_file);
+  EXPECT_EQ(info.points_in_file, 13704u);
+  EXPECT_FALSE(milk.has_normals());
+  // A carton on a table about a metre from the Kinect.
+  const Eigen::Vector3d extent = bounding_box(milk).sizes();
+  EXPECT_GT(extent.maxCoeff(), 0.05);
+  EXPECT_LT(extent.maxCoeff(), 0.5);
+}
+
+TEST(CloudIo, LoadsTheOrganizedSceneDroppingNaNs) {
+  CloudFileInfo info;
+  const PointCloud scene = load_cloud(test::data_path("milk_cartoon_all_small_clorox.pcd"), &info);
+  EXPECT_EQ(info.width, 640u);
+  EXPECT_EQ(info.height, 480u);
+  EXPECT_EQ(info.points_in_file, 640u * 480u);
+  EXPECT_GT(info.non_finite_dropped, 0u);
+  EXPECT_EQ(scene.size() + info.non_finite_dropped, info.points_in_file);
+  EXPECT_TRUE(scene.points().allFinite());
+}
+
+class CloudRoundTrip : public ::testing::TestWithParam<std::pair<std::string, PcdEncoding>> {};
+
+TEST_P(CloudRoundTrip, KeepsPointsAndNormalsToFloatPrecision) {
+  std::mt19937 rng(3);
+  const PointCloud cloud = test::box_and_sphere(300, rng);
+  const std::string path = temp_file(GetParam().first);
+  save_cloud(path, cloud, GetParam().second);
+  CloudFileInfo info;
+  const PointCloud loaded = load_cloud(path, &info);
+  std::filesystem::remove(path);
+  ASSERT_EQ(loaded.size(), cloud.size());
+  ASSERT_TRUE(loaded.has_normals());
+  EXPECT_LT((loaded.points() - cloud.points()).cwiseAbs().maxCoeff(), 1e-7);  // 0.1 um
+  EXPECT_LT((loaded.normals() - cloud.normals()).cwiseAbs().maxCoeff(), 1e-6);
+}
+
+INSTANTIATE_TEST_SUITE_P(Formats, CloudRoundTrip,
+                         ::testing::Values(std::make_pair("a.pcd", PcdEncoding::ascii),
+                                           std::make_pair("b.pcd", PcdEncoding::binary),
+                                           std::make_pair("c.pcd", PcdEncoding::binary_compressed),
+                                           std::make_pair("d.ply", PcdEncoding::binary)));
+
+TEST(CloudIo, RefusesMissingAndForeignFiles) {
+  EXPECT_THROW(load_cloud(temp_file("missing.pcd")), std::invalid_argument);
+  const std::string text = temp_file("not_a_cloud.pcd");
+  std::ofstream(text) << "hello, this is not a point cloud\n";
+  EXPECT_THROW(load_cloud(text), std::invalid_argument);
+  const std::string ply = temp_file("not_a_cloud.ply");
+  std::ofstream(ply) << "solid cube\n";
+  EXPECT_THROW(load_cloud(ply), std::invalid_argument);
+  EXPECT_THROW(load_cloud(temp_file("cloud.xyz")), std::invalid_argument);
+  std::filesystem::remove(text);
+  std::filesystem::remove(ply);
+}
+
+TEST(Preprocessing, VoxelDownsampleAveragesPointsAndNormals) {
+  Points p(4, 3), n(4, 3);
+  p << 0.001, 0.001, 0.001, 0.003, 0.003, 0.003,  // one 1 cm voxel
+      0.051, 0.001, 0.001, 0.052, 0.001, 0.001;   // another
+  n << 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 1;
+  const PointCloud reduced = voxel_downsample(PointCloud(p, n), 0.01);
+  ASSERT_EQ(reduced.size(), 2u);
+  for (Eigen::Index i = 0; i < 2; ++i) {
+    EXPECT_NEAR(reduced.normals().row(i).norm(), 1.0, 1e-6);
+    if (reduced.points()(i, 0) < 0.01) {
+      EXPECT_NEAR(reduced.points()(i, 0), 0.002, 1e-6);
+      EXPECT_NEAR(reduced.normals()(i, 0), std::sqrt(0.5), 1e-6);
+    } else {
+      EXPECT_NEAR(reduced.points()(i, 0), 0.0515, 1e-6);
+    }
+  }
+}
+
+TEST(Preprocessing, VoxelDownsampleRefusesBadSizes) {
+  const PointCloud cloud(Points::Random(10, 3) * 100.0);
+  EXPECT_THROW(voxel_downsample(cloud, 0.0), std::invalid_argument);
+  EXPECT_THROW(voxel_downsample(cloud, NAN), std::invalid_argument);
+  EXPECT_THROW(voxel_downsample(cloud, 1e-6), std::invalid_argument);  // index overflow
+  EXPECT_THROW(voxel_downsample(PointCloud(), 0.01), std::invalid_argument);
+}
+
+TEST(Preprocessing, NormalsOfAPlaneFaceTheViewpoint) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(-0.1, 0.1);
+  Points p(2000, 3);
+  for (Eigen::Index i = 0; i < p.rows(); ++i) p.row(i) << uniform(rng), uniform(rng), 1.0;
+  NormalEstimationParams params;
+  params.radius = 0.02;
+  const PointCloud with_normals = estimate_normals(PointCloud(p), params);  // viewpoint at origin
+  ASSERT_EQ(with_normals.size(), 2000u);
+  EXPECT_LT((with_normals.normals().col(2).array() + 1.0).abs().maxCoeff(), 1e-6);
+}
+
+TEST(Preprocessing, OutwardNormalsOfASphere) {
+  std::mt19937 rng(6);
+  std::normal_distribution<double> gaussian;
+  Points p(3000, 3);
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    p.row(i) = Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized() * 0.1;
+  }
+  NormalEstimationParams params;
+  params.k_neighbors = 15;
+  params.orientation = NormalOrientation::outward;
+  params.threads = 2;
+  const PointCloud with_normals = estimate_normals(PointCloud(p), params);
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    const double alignment = with_normals.normals().row(i).dot(with_normals.points().row(i).normalized());
+    ASSERT_GT(alignment, 0.99) << "point " << i;
+  }
+}
+
+TEST(VoxelGrid, FftFriendlySizes) {
+  EXPECT_EQ(fft_friendly_size(1), 1);
+  EXPECT_EQ(fft_friendly_size(11), 12);
+  EXPECT_EQ(fft_friendly_size(97), 98);
+  EXPECT_EQ(fft_friendly_size(121), 125);
+  EXPECT_EQ(fft_friendly_size(128), 128);
+}
+
+TEST(VoxelGrid, GridForAPairCannotAlias) {
+  const Eigen::AlignedBox3d a(Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.2, 0.1, 0.05));
+  const Eigen::AlignedBox3d b(Eigen::Vector3d(0.5, -0.3, 0), Eigen::Vector3d(0.6, 0.3, 0.05));
+  const GridSpec spec = make_grid_spec(a, b, 0.01);
+  for (int axis = 0; axis < 3; ++axis) {
+    const double union_extent = a.merged(b).sizes()[axis] / 0.01;
+    const double pair_extent = (a.sizes()[axis] + b.sizes()[axis]) / 0.01;
+    EXPECT_GE(spec.dims[axis], union_extent + 1);
+    EXPECT_GE(spec.dims[axis], pair_extent + 2);
+    EXPECT_EQ(fft_friendly_size(spec.dims[axis]), spec.dims[axis]);
+    EXPECT_NEAR(std::remainder(spec.origin[axis], 0.01), 0.0, 1e-12);
+  }
+  EXPECT_TRUE(spec.contains(spec.index_of(a.min())));
+  EXPECT_TRUE(spec.contains(spec.index_of(b.max())));
+}
+
+TEST(VoxelGrid, RefusesGridsOverTheLimit) {
+  const Eigen::AlignedBox3d box(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones());
+  EXPECT_THROW(make_grid_spec(box, box, 0.001), std::invalid_argument);  // 2001^3 voxels
+  try {
+    make_grid_spec(box, box, 0.001);
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("134217728"), std::string::npos) << error.what();
+  }
+  EXPECT_THROW(make_grid_spec(box, box, -1.0), std::invalid_argument);
+  EXPECT_NO_THROW(make_grid_spec(box, box, 0.001, GridLimits{std::size_t{1} << 34}));
+}
+
+TEST(VoxelGrid, IndexIsFloorSoNegativeCoordinatesGetTheirOwnVoxel) {
+  GridSpec spec;
+  spec.origin = Eigen::Vector3d::Constant(-0.1);
+  spec.resolution = 0.01;
+  spec.dims = Eigen::Vector3i::Constant(20);
+  EXPECT_EQ(spec.index_of(Eigen::Vector3d(-0.005, 0.005, 0.0)), Eigen::Vector3i(9, 10, 10));
+  Points p(3, 3);
+  p << -0.005, 0, 0, 0.005, 0, 0, 5.0, 0, 0;
+  const VoxelGrid grid = voxelize(PointCloud(p), spec, Occupancy::binary);
+  EXPECT_EQ(grid.at(9, 10, 10), 1.0f);
+  EXPECT_EQ(grid.at(10, 10, 10), 1.0f);
+  EXPECT_EQ(grid.points_outside, 1u);
+  EXPECT_EQ(grid.occupied_min, Eigen::Vector3i(9, 10, 10));
+  EXPECT_EQ(grid.occupied_max, Eigen::Vector3i(10, 10, 10));
+}
+
+TEST(VoxelGrid, OccupancyModesAgreeWithBruteForce) {
+  std::mt19937 rng(8);
+  const PointCloud cloud = test::box_and_sphere(4000, rng);
+  const GridSpec spec = make_grid_spec(bounding_box(cloud), bounding_box(cloud), 0.008);
+  const VoxelGrid binary = voxelize(cloud, spec, Occupancy::binary);
+  const VoxelGrid count = voxelize(cloud, spec, Occupancy::count);
+  const VoxelGrid trilinear = voxelize(cloud, spec, Occupancy::trilinear);
+  std::vector<int> counts(spec.voxel_count(), 0);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3i v = spec.index_of(cloud.points().row(Eigen::Index(i)).transpose());
+    ++counts[(std::size_t(v.x()) * spec.dims.y() + v.y()) * spec.dims.z() + v.z()];
+  }
+  double total = 0.0;
+  for (std::size_t i = 0; i < counts.size(); ++i) {
+    ASSERT_EQ(count.values[i], float(counts[i]));
+    ASSERT_EQ(binary.values[i], counts[i] > 0 ? 1.0f : 0.0f);
+    total += trilinear.values[i];
+  }
+  EXPECT_NEAR(total, double(cloud.size()), 1e-2);  // trilinear weights sum to 1 per point
+}
+
+TEST(Egi, CountsEveryNormalOnce) {
+  std::mt19937 rng(9);
+  const PointCloud cloud = test::box_and_sphere(5000, rng);
+  for (int bandwidth : {4, 16, 32}) {
+    const SphereGrid egi = egi_histogram(cloud.normals(), bandwidth);
+    EXPECT_EQ(egi.rows(), 2 * bandwidth);
+    EXPECT_EQ(egi.cols(), 2 * bandwidth);
+    EXPECT_DOUBLE_EQ(egi.sum(), 5000.0);
+  }
+}
+
+TEST(Egi, KnownDirectionsLandInTheirCells) {
+  const int B = 8;
+  // +z: theta = 0 -> row 0. -z: theta = pi -> last row. +x: theta = pi/2 -> row B, phi = 0.
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 0, 1), B), Eigen::Vector2i(0, 0));
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 0, -1), B), Eigen::Vector2i(2 * B - 1, 0));
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(1, 0, 0), B), Eigen::Vector2i(B, 0));
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 1, 0), B), Eigen::Vector2i(B, B / 2));      // phi = pi/2
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, -1, 0), B), Eigen::Vector2i(B, 3 * B / 2)); // phi = 3pi/2
+  // The node itself maps to its own cell for every node of the grid.
+  for (int j = 0; j < 2 * B; ++j) {
+    for (int k = 0; k < 2 * B; ++k) {
+      const double t = grid_theta(j, B), p = grid_phi(k, B);
+      const Eigen::Vector3d n(std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t));
+      ASSERT_EQ(egi_cell(n, B), Eigen::Vector2i(j, k));
+    }
+  }
+}
+
+TEST(Egi, RotationAboutZByOneColumnShiftsColumnsByOne) {
+  std::mt19937 rng(10);
+  std::normal_distribution<double> gaussian;
+  Points normals(3000, 3);
+  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
+    normals.row(i) = Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
+  }
+  for (int B : {4, 8, 16}) {
+    const Eigen::Matrix3d Rz = Eigen::AngleAxisd(M_PI / B, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    const Points rotated = normals * Rz.transpose();
+    const SphereGrid before = egi_histogram(normals, B);
+    const SphereGrid after = egi_histogram(rotated, B);
+    for (int k = 0; k < 2 * B; ++k) {
+      ASSERT_TRUE(after.col((k + 1) % (2 * B)).isApprox(before.col(k))) << "B " << B << " column " << k;
+    }
+  }
+}
+
+TEST(Egi, RefusesBadBandwidthAndEmptyInput) {
+  EXPECT_THROW(egi_histogram(Points::Ones(3, 3), 0), std::invalid_argument);
+  EXPECT_THROW(egi_histogram(Points::Ones(3, 3), kMaxBandwidth + 1), std::invalid_argument);
+  EXPECT_THROW(egi_histogram(Points(), 8), std::invalid_argument);
+  const Eigen::VectorXd weights = Eigen::VectorXd::Ones(2);
+  EXPECT_THROW(egi_histogram(Points::Ones(3, 3), 8, &weights), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace spectral_vs

@@ -1,0 +1,65 @@
+#pragma once
+// Seeded synthetic data and the path of the shared real scans, for the C++ tests.
+
+#include <spectral_vs/representation/point_cloud.hpp>
+
+#include <Eigen/Geometry>
+#include <cstdlib>
+#include <random>
+#include <string>
+
+namespace spectral_vs::test {
+
+inline std::string data_path(const std::string& file) {
+  const char* folder = std::getenv("SPECTRAL_VS_DATA");
+  return std::string(folder ? folder : SPECTRAL_VS_TEST_DATA) + "/" + file;
+}
+
+/// Surface samples of a box (0.24 x 0.12 x 0.08 m) with a sphere (r = 0.06 m) beside
+/// it: an asymmetric 0.25 m object with outward unit normals.
+inline PointCloud box_and_sphere(int samples, std::mt19937& rng) {
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::normal_distribution<double> gaussian(0.0, 1.0);
+  Points points(samples, 3), normals(samples, 3);
+  const Eigen::Vector3d half(0.12, 0.06, 0.04);
+  for (int i = 0; i < samples; ++i) {
+    if (i % 2 == 0) {
+      Eigen::Vector3d n(gaussian(rng), gaussian(rng), gaussian(rng));
+      n.normalize();
+      points.row(i) = (Eigen::Vector3d(0.10, 0.10, 0.0) + 0.06 * n).transpose();
+      normals.row(i) = n.transpose();
+    } else {
+      const int axis = std::uniform_int_distribution<int>(0, 2)(rng);
+      Eigen::Vector3d u(uniform(rng), uniform(rng), uniform(rng));
+      u[axis] = u[axis] < 0 ? -1.0 : 1.0;
+      points.row(i) = half.cwiseProduct(u).transpose();
+      Eigen::Vector3d n = Eigen::Vector3d::Zero();
+      n[axis] = u[axis];
+      normals.row(i) = n.transpose();
+    }
+  }
+  return PointCloud(points, normals);
+}
+
+/// `cloud` with each point kept with probability `keep` and moved by Gaussian noise.
+inline PointCloud thin_and_jitter(const PointCloud& cloud, double keep, double sigma, std::mt19937& rng) {
+  std::bernoulli_distribution kept(keep);
+  std::normal_distribution<double> noise(0.0, sigma);
+  Points points(cloud.size(), 3);
+  Eigen::Index n = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    if (!kept(rng)) continue;
+    points.row(n++) = cloud.points().row(Eigen::Index(i)) +
+                      Eigen::RowVector3d(noise(rng), noise(rng), noise(rng));
+  }
+  points.conservativeResize(n, Eigen::NoChange);
+  return PointCloud(points);
+}
+
+inline Transform translation(const Eigen::Vector3d& t) {
+  Transform T = Transform::Identity();
+  T.topRightCorner<3, 1>() = t;
+  return T;
+}
+
+}  // namespace spectral_vs::test
