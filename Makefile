@@ -52,10 +52,10 @@ venv: $(VENV)/.stamp
 # changed only re-links nothing and re-packs the wheel.
 install: system-deps venv
 	$(PY) -m pip install -q --no-build-isolation --no-deps \
-		-Ccmake.define.SPECTRAL_VS_BUILD_TESTS=ON .
+		-Ccmake.define.SPECTRAL_VS_BUILD_TESTS=ON -Ccmake.define.SPECTRAL_VS_BUILD_BENCHMARKS=ON .
 
 bench: install
-	$(PY) benchmarks/translation_benchmark.py --data $(DATA)
+	$(PY) benchmarks/translation_benchmark.py --build-dir $(BUILD_DIR)
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks

@@ -11,7 +11,11 @@ namespace {
 
 // A VoxelGrid as is, or a 3-D float array taken as a grid of unit voxels at the origin.
 VoxelGrid to_grid(const py::handle& object, const char* argument) {
-  if (py::isinstance<VoxelGrid>(object)) return object.cast<VoxelGrid>();
+  if (py::isinstance<VoxelGrid>(object)) {
+    VoxelGrid grid = object.cast<VoxelGrid>();
+    if (grid.empty()) throw py::value_error(std::string(argument) + " is empty: no occupied voxel");
+    return grid;
+  }
   auto array = py::array::ensure(object);
   if (!array || array.ndim() != 3) {
     throw py::value_error(std::string(argument) + " must be a VoxelGrid or a 3-D array");
@@ -38,6 +42,7 @@ VoxelGrid to_grid(const py::handle& object, const char* argument) {
           grid.occupied_max = grid.occupied_max.cwiseMax(Eigen::Vector3i(i, j, k));
         }
       }
+  if (grid.empty()) throw py::value_error(std::string(argument) + " is empty: no occupied voxel");
   return grid;
 }
 

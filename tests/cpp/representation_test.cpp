@@ -188,11 +188,12 @@ TEST(Preprocessing, OutwardNormalsOfASphere) {
 }
 
 TEST(VoxelGrid, FftFriendlySizes) {
-  EXPECT_EQ(fft_friendly_size(1), 1);
+  EXPECT_EQ(fft_friendly_size(1), 2);
   EXPECT_EQ(fft_friendly_size(11), 12);
-  EXPECT_EQ(fft_friendly_size(97), 98);
-  EXPECT_EQ(fft_friendly_size(121), 125);
+  EXPECT_EQ(fft_friendly_size(97), 100);   // 98 = 2 * 7^2 has a factor 7
+  EXPECT_EQ(fft_friendly_size(121), 128);  // 125 is odd, 126 has a factor 7
   EXPECT_EQ(fft_friendly_size(128), 128);
+  EXPECT_EQ(fft_friendly_size(161), 162);
 }
 
 TEST(VoxelGrid, GridForAPairCannotAlias) {

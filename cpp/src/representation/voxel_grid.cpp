@@ -23,10 +23,10 @@ bool GridSpec::contains(const Eigen::Vector3i& index) const {
 }
 
 int fft_friendly_size(int n) {
-  if (n < 1) return 1;
-  for (int candidate = n;; ++candidate) {
+  for (int candidate = std::max(n, 2);; ++candidate) {
+    if (candidate % 2 != 0) continue;  // even: the real-to-complex transform's fast path
     int rest = candidate;
-    for (int prime : {2, 3, 5, 7}) {
+    for (int prime : {2, 3, 5}) {
       while (rest % prime == 0) rest /= prime;
     }
     if (rest == 1) return candidate;

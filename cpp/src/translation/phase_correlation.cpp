@@ -68,7 +68,20 @@ std::vector<int> unfolded_shifts(int n, int lo, int hi) {
 // Signed frequency, cycles per voxel, of index k of an n-point transform.
 double frequency(int k, int n) { return (k <= n / 2 ? k : k - n) / static_cast<double>(n); }
 
-double wrap_angle(double a) { return std::remainder(a, 2.0 * M_PI); }
+// atan2 to within 2e-4 rad (a minimax polynomial on [0, 1] and octant symmetry): the
+// phases it reads are far noisier than that, and std::atan2 was a third of the fit.
+float fast_atan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float a = std::min(ax, ay) / std::max(std::max(ax, ay), 1e-30f);
+  const float s = a * a;
+  float r = ((-0.0464964749f * s + 0.15931422f) * s - 0.327622764f) * s * a + a;
+  if (ay > ax) r = 1.57079637f - r;
+  if (x < 0.0f) r = 3.14159274f - r;
+  return y < 0.0f ? -r : r;
+}
+
+// a wrapped to [-pi, pi]; std::remainder is exact but several times slower.
+double wrap_angle(double a) { return a - 2.0 * M_PI * std::nearbyint(a / (2.0 * M_PI)); }
 
 }  // namespace
 
@@ -121,30 +134,36 @@ struct PhaseCorrelation::Impl {
   }
 
   // Normalised cross-power spectrum of eq. (7), oriented so that its inverse peaks at
-  // the shift of the moving grid onto the target.
+  // the shift of the moving grid onto the target. Voxel values are non-negative, so
+  // no bin is larger than the DC bin: it sets the floor below which a bin carries no
+  // phase (no energy in either grid) and is left out. Written on plain floats, without
+  // branches, so that the compiler vectorises the loop.
   void form_cross_power() {
-    float largest = 0.0f;
+    const float floor = std::abs(target_spectrum[0] * moving_spectrum[0]) * 1e-6f;
+    const float floor_power = floor * floor;
+    const float* t = reinterpret_cast<const float*>(target_spectrum.get());
+    const float* m = reinterpret_cast<const float*>(moving_spectrum.get());
+    float* out = reinterpret_cast<float*>(cross_power.get());
+    std::size_t kept = 0;
     for (std::size_t i = 0; i < complex_count; ++i) {
-      const Complex product = target_spectrum[i] * std::conj(moving_spectrum[i]);
-      cross_power[i] = product;
-      largest = std::max(largest, std::norm(product));
+      const float re = t[2 * i] * m[2 * i] + t[2 * i + 1] * m[2 * i + 1];
+      const float im = t[2 * i + 1] * m[2 * i] - t[2 * i] * m[2 * i + 1];
+      const float power = re * re + im * im;
+      const bool keep = power > floor_power;
+      const float scale = keep ? 1.0f / std::sqrt(power) : 0.0f;
+      out[2 * i] = re * scale;
+      out[2 * i + 1] = im * scale;
+      kept += keep;
     }
-    // Bins with no energy in either grid carry no phase; leave them out.
-    const float floor = largest * 1e-12f;
-    std::size_t kept_edge = 0, kept_inner = 0;
+    // An inner bin of the half spectrum also stands for its conjugate twin; the edge
+    // bins (k = 0 and, for even nz, k = nz/2) stand for themselves.
+    std::size_t kept_edge = 0;
     const int nz = spec.dims.z();
-    for (std::size_t i = 0; i < complex_count; ++i) {
-      const float power = std::norm(cross_power[i]);
-      if (power > floor) {
-        cross_power[i] /= std::sqrt(power);
-        const int k = static_cast<int>(i % static_cast<std::size_t>(half_z));
-        ((k == 0 || 2 * k == nz) ? kept_edge : kept_inner) += 1;
-      } else {
-        cross_power[i] = Complex(0.0f, 0.0f);
-      }
+    for (std::size_t row = 0; row < complex_count; row += half_z) {
+      kept_edge += cross_power[row] != Complex(0.0f, 0.0f);
+      if (nz % 2 == 0) kept_edge += cross_power[row + half_z - 1] != Complex(0.0f, 0.0f);
     }
-    // An inner bin of the half spectrum also stands for its conjugate twin.
-    phase_bins = static_cast<double>(kept_edge + 2 * kept_inner);
+    phase_bins = static_cast<double>(2 * kept - kept_edge);
   }
 
   Eigen::Vector3i find_peak(const VoxelGrid& moving, float& height) const {
@@ -172,15 +191,17 @@ struct PhaseCorrelation::Impl {
     return best;
   }
 
-  // Least-squares fit of the phase plane angle(X(f)) = -2 pi f . d over |f| < band, after
-  // removing the integer peak: the sub-voxel residual d, in voxels.
-  Eigen::Vector3d fit_phase_plane(const Eigen::Vector3i& peak) const {
-    struct Bin {
-      Eigen::Vector3d f;
-      double angle;
-      double weight;
-    };
-    std::vector<Bin> bins;
+  // The bins of the half spectrum with |f| < band on every axis, found once per grid.
+  struct LowBin {
+    std::size_t index;
+    Eigen::Vector3d f;  // cycles per voxel
+    double weight;      // 2 for an inner bin, which also stands for its conjugate twin
+  };
+  std::vector<LowBin> low_bins;
+  mutable std::vector<double> low_angles;  // per-call scratch of fit_phase_plane
+  mutable std::vector<char> low_valid;
+
+  void find_low_bins() {
     const double band = params.subvoxel_band;
     const int nx = spec.dims.x(), ny = spec.dims.y(), nz = spec.dims.z();
     for (int i = 0; i < nx; ++i) {
@@ -189,28 +210,42 @@ struct PhaseCorrelation::Impl {
       for (int j = 0; j < ny; ++j) {
         const double fy = frequency(j, ny);
         if (std::abs(fy) >= band) continue;
-        for (int k = 0; k < half_z; ++k) {
-          const double fz = k / static_cast<double>(nz);
-          if (fz >= band) break;
+        for (int k = 0; k < half_z && k < band * nz; ++k) {
+          if (i == 0 && j == 0 && k == 0) continue;  // DC carries no phase
           const std::size_t index = (static_cast<std::size_t>(i) * ny + j) * half_z + k;
-          const Complex product = target_spectrum[index] * std::conj(moving_spectrum[index]);
-          if (std::norm(product) == 0.0f) continue;
-          const Eigen::Vector3d f(fx, fy, fz);
-          const double angle = wrap_angle(std::arg(std::complex<double>(product)) + 2.0 * M_PI * f.dot(peak.cast<double>()));
-          // A bin strictly inside the half spectrum stands for itself and its conjugate twin.
-          const double weight = (k == 0 || 2 * k == nz) ? 1.0 : 2.0;
-          bins.push_back({f, angle, weight});
+          low_bins.push_back({index, Eigen::Vector3d(fx, fy, k / double(nz)),
+                              (k == 0 || 2 * k == nz) ? 1.0 : 2.0});
         }
       }
+    }
+  }
+
+  // Least-squares fit of the phase plane angle(X(f)) = -2 pi f . d over the low bins,
+  // after removing the integer peak: the sub-voxel residual d, in voxels. Two passes,
+  // the second on the phases left by the first, so that a residual near half a voxel
+  // does not wrap.
+  Eigen::Vector3d fit_phase_plane(const Eigen::Vector3i& peak) const {
+    std::vector<double>& angles = low_angles;
+    std::vector<char>& valid = low_valid;
+    angles.resize(low_bins.size());
+    valid.resize(low_bins.size());
+    const Eigen::Vector3d p = peak.cast<double>();
+    for (std::size_t b = 0; b < low_bins.size(); ++b) {
+      const std::size_t index = low_bins[b].index;
+      const Complex product = target_spectrum[index] * std::conj(moving_spectrum[index]);
+      valid[b] = std::norm(product) > 0.0f;
+      angles[b] = wrap_angle(fast_atan2(product.imag(), product.real()) + 2.0 * M_PI * low_bins[b].f.dot(p));
     }
     Eigen::Vector3d d = Eigen::Vector3d::Zero();
     for (int pass = 0; pass < 2; ++pass) {
       Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
       Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
-      for (const Bin& bin : bins) {
-        const double residual = wrap_angle(bin.angle + 2.0 * M_PI * bin.f.dot(d));
-        normal += bin.weight * bin.f * bin.f.transpose();
-        rhs += bin.weight * bin.f * residual;
+      for (std::size_t b = 0; b < low_bins.size(); ++b) {
+        if (!valid[b]) continue;
+        const LowBin& bin = low_bins[b];
+        const double residual = wrap_angle(angles[b] + 2.0 * M_PI * bin.f.dot(d));
+        normal.noalias() += bin.weight * bin.f * bin.f.transpose();
+        rhs.noalias() += bin.weight * residual * bin.f;
       }
       const Eigen::Vector3d step = normal.ldlt().solve(rhs) / (-2.0 * M_PI);
       if (!step.allFinite()) return Eigen::Vector3d::Zero();
@@ -235,6 +270,7 @@ PhaseCorrelation::PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationP
   impl_->spec = spec;
   impl_->params = params;
   impl_->make_plans();
+  if (params.subvoxel) impl_->find_low_bins();
 }
 
 PhaseCorrelation::~PhaseCorrelation() = default;

@@ -1,0 +1,80 @@
+"""3D phase correlation from Python: integer shifts, sub-voxel accuracy, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import box_and_sphere
+
+import spectral_vs as svs
+
+
+def _translation(t) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = t
+    return T
+
+
+def test_integer_shift_of_random_grid_is_exact(rng):
+    for _ in range(10):
+        a = np.zeros((40, 36, 32), dtype=np.float32)
+        a[12:28, 10:26, 10:22] = rng.random((16, 16, 12)) < 0.2
+        shift = rng.integers(-8, 9, size=3)
+        b = np.roll(a, shift, axis=(0, 1, 2))
+        estimate, peak = svs.phase_correlation(a, b)
+        np.testing.assert_allclose(estimate, shift, atol=1e-3)
+        assert peak == pytest.approx(1.0, abs=1e-5)
+        assert svs.translation_cost(a, b, shift) == 0.0
+
+
+@pytest.mark.parametrize(("occupancy", "bound_mm"), [("trilinear", 1.0), ("binary", 1.5)])
+def test_subvoxel_translation_of_milk_carton(data_dir, rng, occupancy, bound_mm):
+    milk = svs.load_cloud(data_dir / "milk.pcd").points
+    errors = []
+    for _ in range(10):
+        t = rng.uniform(-0.03, 0.03, size=3)
+        keep_a = rng.random(len(milk)) > 0.3
+        keep_b = rng.random(len(milk)) > 0.3
+        moving = svs.PointCloud(milk[keep_a] + rng.normal(0, 0.001, (keep_a.sum(), 3)))
+        target = svs.PointCloud(milk[keep_b] + t + rng.normal(0, 0.001, (keep_b.sum(), 3)))
+        spec = svs.make_grid_spec(moving, target, 0.008)
+        correlation = svs.PhaseCorrelation(spec)
+        correlation.set_target(svs.voxelize(target, spec, occupancy=occupancy))
+        estimate = correlation.estimate(svs.voxelize(moving, spec, occupancy=occupancy))
+        errors.append(1000 * np.linalg.norm(np.asarray(estimate.shift) - t))
+    assert max(errors) < bound_mm, errors
+
+
+def test_subvoxel_translation_of_synthetic_shape(rng):
+    points, _ = box_and_sphere(rng, 8000)
+    for _ in range(10):
+        t = rng.uniform(-0.03, 0.03, size=3)
+        moving = svs.PointCloud(points + rng.normal(0, 0.001, points.shape))
+        target = svs.PointCloud(points + t + rng.normal(0, 0.001, points.shape))
+        spec = svs.make_grid_spec(moving, target, 0.008)
+        estimate = svs.PhaseCorrelation(spec)
+        estimate.set_target(svs.voxelize(target, spec, occupancy="trilinear"))
+        result = estimate.estimate(svs.voxelize(moving, spec, occupancy="trilinear"))
+        assert 1000 * np.linalg.norm(np.asarray(result.shift) - t) < 1.0
+
+
+def test_same_input_gives_the_same_result(rng):
+    points, _ = box_and_sphere(rng, 3000)
+    a = svs.PointCloud(points)
+    b = a.transformed(_translation([0.021, -0.013, 0.008]))
+    spec = svs.make_grid_spec(a, b, 0.008)
+    runs = {tuple(svs.phase_correlation(svs.voxelize(a, spec), svs.voxelize(b, spec))[0]) for _ in range(3)}
+    assert len(runs) == 1
+
+
+def test_phase_correlation_errors():
+    with pytest.raises(ValueError, match="grid_a must be a VoxelGrid or a 3-D array"):
+        svs.phase_correlation(np.zeros((4, 4)), np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="grid_a is empty"):
+        svs.phase_correlation(np.zeros((4, 4, 4)), np.ones((4, 4, 4)))
+    with pytest.raises(ValueError, match="expected the moving grid's"):
+        svs.phase_correlation(np.ones((4, 4, 4)), np.ones((4, 4, 2)))
+    with pytest.raises(ValueError, match="subvoxel_band must be in"):
+        svs.phase_correlation(np.ones((4, 4, 4)), np.ones((4, 4, 4)), subvoxel_band=2.0)
+    with pytest.raises(ValueError, match="has non-finite values"):
+        svs.phase_correlation(np.full((4, 4, 4), np.nan), np.ones((4, 4, 4)))
