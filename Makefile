@@ -13,7 +13,7 @@ BUILD_DIR = $(firstword $(wildcard build/$(PYTAG)-*))
 APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev \
 	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev
 PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
-PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" ruff
+PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" ruff
 
 .PHONY: all demo test test-cpp test-python install system-deps venv bench format lint clean
 

@@ -15,3 +15,14 @@ add_library(spectral_vs_private_deps INTERFACE)
 target_include_directories(spectral_vs_private_deps SYSTEM INTERFACE ${PCL_INCLUDE_DIRS})
 target_link_libraries(spectral_vs_private_deps INTERFACE
   ${PCL_LIBRARIES} PkgConfig::FFTW3F ${FFTW3F_THREADS_LIBRARY})
+
+# Rotation: the global SO(3) search transforms in double precision (libfftw3).
+pkg_check_modules(FFTW3 REQUIRED IMPORTED_TARGET fftw3)
+target_link_libraries(spectral_vs_private_deps INTERFACE PkgConfig::FFTW3)
+
+# Kinematics: orocos KDL sets variables only; urdfdom exports targets. The chain is built
+# from urdfdom's model in the code, because find_package(kdl_parser) needs ROS's ament.
+find_package(orocos_kdl REQUIRED)
+find_package(urdfdom CONFIG REQUIRED)
+target_include_directories(spectral_vs_private_deps SYSTEM INTERFACE ${orocos_kdl_INCLUDE_DIRS})
+target_link_libraries(spectral_vs_private_deps INTERFACE ${orocos_kdl_LIBRARIES} urdfdom::urdfdom_model)

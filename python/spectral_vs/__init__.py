@@ -11,11 +11,17 @@ import os
 
 from spectral_vs._core import (
     CloudFileInfo,
+    DampedSolution,
+    DampingParams,
     GridSpec,
+    Kinematics,
     PhaseCorrelation,
     PointCloud,
     TranslationEstimate,
+    VelocityCommand,
+    VelocityCommandParams,
     VoxelGrid,
+    damped_least_squares,
     egi,
     egi_cell,
     estimate_normals,
@@ -29,6 +35,8 @@ from spectral_vs._core import (
     voxel_downsample,
     voxelize,
 )
+
+from spectral_vs.robot import RobotInterface
 
 __version__ = "0.1.0"
 
@@ -52,11 +60,18 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
 __all__ = [
     "CloudFileInfo",
+    "DampedSolution",
+    "DampingParams",
     "GridSpec",
+    "Kinematics",
     "PhaseCorrelation",
     "PointCloud",
+    "RobotInterface",
     "TranslationEstimate",
+    "VelocityCommand",
+    "VelocityCommandParams",
     "VoxelGrid",
+    "damped_least_squares",
     "egi",
     "egi_cell",
     "estimate_normals",

@@ -1,0 +1,59 @@
+"""PyBullet simulation of the paper's servoing experiment: a KUKA LBR iiwa with a wrist
+depth camera above a table of cluttered objects.
+
+Needs the optional dependency ``pybullet`` (``pip install pybullet``). The main entry
+point is :class:`PyBulletRobot`, an implementation of
+:class:`spectral_vs.robot.RobotInterface`.
+"""
+
+from __future__ import annotations
+
+try:
+    import pybullet  # noqa: F401
+except ImportError as error:  # pragma: no cover - depends on the environment
+    raise ImportError("spectral_vs.sim needs PyBullet: pip install pybullet") from error
+
+from spectral_vs.sim.camera import (
+    CameraIntrinsics,
+    CameraParams,
+    DepthNoise,
+    NormalParams,
+    back_project,
+    depth_to_cloud,
+    organized_normals,
+    render_depth,
+)
+from spectral_vs.sim.robot import (
+    BASE_LINK,
+    HOME_Q,
+    TIP_LINK,
+    PyBulletRobot,
+    SimParams,
+    default_T_tip_camera,
+    iiwa_urdf_path,
+    pose_matrix,
+)
+from spectral_vs.sim.scene import TABLE_HEIGHT, PlacedObject, SceneParams, build_scene
+
+__all__ = [
+    "BASE_LINK",
+    "HOME_Q",
+    "TABLE_HEIGHT",
+    "TIP_LINK",
+    "CameraIntrinsics",
+    "CameraParams",
+    "DepthNoise",
+    "NormalParams",
+    "PlacedObject",
+    "PyBulletRobot",
+    "SceneParams",
+    "SimParams",
+    "back_project",
+    "build_scene",
+    "default_T_tip_camera",
+    "depth_to_cloud",
+    "iiwa_urdf_path",
+    "organized_normals",
+    "pose_matrix",
+    "render_depth",
+]

@@ -1,0 +1,307 @@
+"""A simulated depth camera: PyBullet rendering, depth noise, and the organized depth image
+turned into a point cloud with normals.
+
+Frames: the camera frame is the usual vision frame (Z forward along the optical axis,
+X right, Y down in the image). PyBullet's view matrix is OpenGL's (looking along -Z, Y
+up): ``T_world_opengl = T_world_camera @ diag(1, -1, -1, 1)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet
+
+from spectral_vs._core import PointCloud
+
+#: Flip between the vision camera frame and PyBullet's OpenGL camera frame.
+OPENGL_FROM_VISION = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """A pinhole depth camera as PyBullet renders it.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size, pixels.
+    vertical_fov_deg : float
+        Vertical field of view, degrees (about 58 for the Ensenso N35 of the paper and a
+        Kinect-class sensor).
+    near, far : float
+        Clipping planes, metres. Surfaces beyond ``far`` (or nothing at all) read as
+        missing; surfaces nearer than ``near`` are clipped away.
+    """
+
+    width: int = 320
+    height: int = 240
+    vertical_fov_deg: float = 58.0
+    near: float = 0.05
+    far: float = 3.0
+
+    def __post_init__(self) -> None:
+        if self.width < 3 or self.height < 3:
+            raise ValueError(
+                f"width and height must be >= 3 pixels, got {self.width}x{self.height}"
+            )
+        if not 1.0 <= self.vertical_fov_deg <= 170.0:
+            raise ValueError(f"vertical_fov_deg must be in [1, 170], got {self.vertical_fov_deg}")
+        if not 0.0 < self.near < self.far:
+            raise ValueError(f"need 0 < near < far, got near={self.near}, far={self.far}")
+
+    @property
+    def fy(self) -> float:
+        """Focal length in pixels (square pixels: fx = fy)."""
+        return 0.5 * self.height / math.tan(math.radians(self.vertical_fov_deg) / 2.0)
+
+    @property
+    def fx(self) -> float:
+        return self.fy
+
+    @property
+    def cx(self) -> float:
+        """Column of the optical axis. PyBullet's TinyRenderer samples column u at
+        x/z = (u - W/2) / fx (measured with PyBullet 3.2.7)."""
+        return 0.5 * self.width
+
+    @property
+    def cy(self) -> float:
+        """Row of the optical axis. TinyRenderer flips the rows of an OpenGL image whose
+        centre row is H/2, so row v samples y/z = (v - (H/2 - 1)) / fy (measured)."""
+        return 0.5 * self.height - 1.0
+
+    def matrix(self) -> np.ndarray:
+        """The 3 x 3 camera matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class DepthNoise:
+    """Depth noise of a structured-light / stereo sensor: Gaussian along the ray with a
+    standard deviation growing with depth, ``sigma(z) = sigma_0 + sigma_quadratic * z**2``,
+    and a fraction of pixels with no measurement.
+
+    Attributes
+    ----------
+    sigma_0 : float
+        Constant part of the standard deviation, metres.
+    sigma_quadratic : float
+        Quadratic part, 1/m (0.0019 gives about 0.7 mm at 0.6 m and 1.9 mm at 1 m, the
+        order of a Kinect-class sensor).
+    missing_fraction : float
+        Probability that a pixel reads as missing, in [0, 1).
+    seed : int
+        Seed of the noise generator; a new camera with the same seed draws the same noise.
+    """
+
+    sigma_0: float = 0.0
+    sigma_quadratic: float = 0.0
+    missing_fraction: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.sigma_0 < 0.0 or self.sigma_quadratic < 0.0:
+            raise ValueError("sigma_0 and sigma_quadratic must be >= 0")
+        if not 0.0 <= self.missing_fraction < 1.0:
+            raise ValueError(f"missing_fraction must be in [0, 1), got {self.missing_fraction}")
+
+    @property
+    def enabled(self) -> bool:
+        return self.sigma_0 > 0.0 or self.sigma_quadratic > 0.0 or self.missing_fraction > 0.0
+
+    def sigma(self, depth: np.ndarray) -> np.ndarray:
+        """Standard deviation of the depth noise at ``depth`` (metres), metres."""
+        return self.sigma_0 + self.sigma_quadratic * np.square(depth)
+
+    def apply(self, depth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A noisy copy of a depth image (metres, NaN = missing)."""
+        noisy = depth + self.sigma(depth) * rng.standard_normal(depth.shape)
+        noisy[rng.random(depth.shape) < self.missing_fraction] = np.nan
+        return noisy
+
+
+@dataclass(frozen=True)
+class NormalParams:
+    """Normals from the organized depth image.
+
+    The normal of pixel (v, u) is the cross product of the central differences of the
+    back-projected points ``normal_step`` pixels away along the rows and the columns,
+    summed over a ``window`` x ``window`` neighbourhood (an area-weighted average that
+    tames depth noise), normalised and oriented toward the camera. Pixels whose
+    neighbours are missing or lie across a depth jump larger than ``max_depth_jump``
+    times their depth are dropped (silhouette edges have no reliable normal).
+
+    Attributes
+    ----------
+    normal_step : int
+        Half-baseline of the differences, pixels (>= 1).
+    window : int
+        Side of the averaging window, pixels (odd, >= 1).
+    max_depth_jump : float
+        Largest relative depth change to a stencil neighbour (fraction of the depth).
+    stride : int
+        Keep every ``stride``-th pixel along rows and columns (1 = all).
+    """
+
+    normal_step: int = 2
+    window: int = 5
+    max_depth_jump: float = 0.05
+    stride: int = 1
+
+    def __post_init__(self) -> None:
+        if self.normal_step < 1:
+            raise ValueError(f"normal_step must be >= 1, got {self.normal_step}")
+        if self.window < 1 or self.window % 2 == 0:
+            raise ValueError(f"window must be odd and >= 1, got {self.window}")
+        if self.max_depth_jump <= 0.0:
+            raise ValueError(f"max_depth_jump must be > 0, got {self.max_depth_jump}")
+        if self.stride < 1:
+            raise ValueError(f"stride must be >= 1, got {self.stride}")
+
+
+@dataclass(frozen=True)
+class CameraParams:
+    """Everything about the simulated depth camera except where it is mounted."""
+
+    intrinsics: CameraIntrinsics = field(default_factory=CameraIntrinsics)
+    noise: DepthNoise = field(default_factory=DepthNoise)
+    normals: NormalParams = field(default_factory=NormalParams)
+
+
+# --- Rendering ---------------------------------------------------------------------------
+
+
+def view_matrix(T_world_camera: np.ndarray) -> list[float]:
+    """PyBullet's view matrix (column-major OpenGL) for a vision camera at ``T_world_camera``."""
+    T_opengl_world = np.linalg.inv(np.asarray(T_world_camera, dtype=float) @ OPENGL_FROM_VISION)
+    return T_opengl_world.T.reshape(-1).tolist()
+
+
+def linearize_depth(buffer: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
+    """Metric planar depth (metres) from an OpenGL depth buffer in [0, 1]; NaN where
+    nothing was hit (buffer = 1, the far plane)."""
+    near, far = intrinsics.near, intrinsics.far
+    buffer = np.asarray(buffer, dtype=np.float64)
+    depth = far * near / (far - (far - near) * buffer)
+    depth[buffer >= 1.0] = np.nan
+    return depth
+
+
+def render_depth(client, T_world_camera: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
+    """Render the planar depth image (H, W) in metres, NaN where nothing is seen.
+
+    Parameters
+    ----------
+    client
+        A ``pybullet_utils.bullet_client.BulletClient`` (or the ``pybullet`` module).
+    T_world_camera : ndarray, shape (4, 4)
+        Pose of the vision camera frame in the world.
+    intrinsics : CameraIntrinsics
+    """
+    w, h = intrinsics.width, intrinsics.height
+    projection = client.computeProjectionMatrixFOV(
+        fov=intrinsics.vertical_fov_deg,
+        aspect=w / h,
+        nearVal=intrinsics.near,
+        farVal=intrinsics.far,
+    )
+    image = client.getCameraImage(
+        w,
+        h,
+        viewMatrix=view_matrix(T_world_camera),
+        projectionMatrix=projection,
+        renderer=pybullet.ER_TINY_RENDERER,
+        flags=pybullet.ER_NO_SEGMENTATION_MASK,
+    )
+    return linearize_depth(np.reshape(image[3], (h, w)), intrinsics)
+
+
+# --- Depth image -> cloud ----------------------------------------------------------------
+
+
+def back_project(depth: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
+    """Organized points (H, W, 3) in the camera frame from a planar depth image (metres)."""
+    h, w = depth.shape
+    u = (np.arange(w) - intrinsics.cx) / intrinsics.fx
+    v = (np.arange(h) - intrinsics.cy) / intrinsics.fy
+    points = np.empty((h, w, 3))
+    points[..., 0] = depth * u[np.newaxis, :]
+    points[..., 1] = depth * v[:, np.newaxis]
+    points[..., 2] = depth
+    return points
+
+
+def _box_sum(image: np.ndarray, window: int) -> np.ndarray:
+    """Sum over a window x window neighbourhood of each pixel (zero padding), separably."""
+    r = window // 2
+    if r == 0:
+        return image
+    padded = np.pad(image, r)
+    h, w = image.shape
+    rows = padded[0:h].copy()
+    for i in range(1, window):
+        rows += padded[i : i + h]
+    out = rows[:, 0:w].copy()
+    for j in range(1, window):
+        out += rows[:, j : j + w]
+    return out
+
+
+def organized_normals(points: np.ndarray, params: NormalParams = NormalParams()) -> np.ndarray:
+    """Unit normals (H, W, 3) of organized points, oriented toward the camera origin;
+    NaN where no reliable normal exists (see :class:`NormalParams`).
+
+    Computed per coordinate plane in float32 (4x faster than interleaved float64; the
+    normals differ by about 1e-5 rad)."""
+    s = params.normal_step
+    h, w = points.shape[:2]
+    normals = np.full((h, w, 3), np.nan)
+    if h <= 2 * s or w <= 2 * s:
+        return normals
+    x, y, z = (np.asarray(points[..., i], dtype=np.float32) for i in range(3))
+    # The pixel and its four stencil neighbours, on the interior where all exist.
+    center = (slice(s, -s), slice(s, -s))
+    right, left = (slice(s, -s), slice(2 * s, None)), (slice(s, -s), slice(None, -2 * s))
+    down, up = (slice(2 * s, None), slice(s, -s)), (slice(None, -2 * s), slice(s, -s))
+    depth = z[center]
+    limit = params.max_depth_jump * depth
+    with np.errstate(invalid="ignore"):
+        reliable = np.isfinite(depth)
+        for neighbour in (right, left, down, up):
+            reliable &= np.abs(z[neighbour] - depth) <= limit
+    # Central differences along the columns (u) and the rows (v), and their cross product.
+    ux, uy, uz = x[right] - x[left], y[right] - y[left], z[right] - z[left]
+    vx, vy, vz = x[down] - x[up], y[down] - y[up], z[down] - z[up]
+    cross = [vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux]
+    for component in cross:
+        component[~reliable] = 0.0
+    nx, ny, nz = (_box_sum(component, params.window) for component in cross)
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    valid = reliable & (norm > 0.0)
+    # Toward the camera: n . (0 - p) > 0, so flip where n . p > 0.
+    toward = np.where(nx * x[center] + ny * y[center] + nz * depth > 0.0, -1.0, 1.0)
+    scale = np.where(valid, toward / np.where(valid, norm, 1.0), np.nan)
+    interior = normals[center]
+    for i, component in enumerate((nx, ny, nz)):
+        interior[..., i] = component * scale
+    return normals
+
+
+def depth_to_cloud(
+    depth: np.ndarray, intrinsics: CameraIntrinsics, params: NormalParams = NormalParams()
+) -> PointCloud:
+    """The point cloud with normals of a planar depth image (metres, NaN = missing), in
+    the camera frame; pixels without a point or a reliable normal are dropped."""
+    depth = np.asarray(depth, dtype=np.float64)
+    expected = (intrinsics.height, intrinsics.width)
+    if depth.shape != expected:
+        raise ValueError(f"depth must have shape {expected} (height, width), got {depth.shape}")
+    points = back_project(depth, intrinsics)
+    normals = organized_normals(points, params)
+    points = points[:: params.stride, :: params.stride].reshape(-1, 3)
+    normals = normals[:: params.stride, :: params.stride].reshape(-1, 3)
+    keep = np.isfinite(normals[:, 0])
+    return PointCloud(np.ascontiguousarray(points[keep]), np.ascontiguousarray(normals[keep]))

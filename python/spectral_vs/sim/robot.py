@@ -1,0 +1,276 @@
+"""The simulated KUKA LBR iiwa with a wrist depth camera, in PyBullet DIRECT mode.
+
+:class:`PyBulletRobot` implements :class:`spectral_vs.robot.RobotInterface`, so a servo
+loop written for it also drives a real robot.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pybullet
+import pybullet_data
+from pybullet_utils.bullet_client import BulletClient
+
+from spectral_vs._core import Kinematics, PointCloud
+from spectral_vs.sim.camera import CameraParams, depth_to_cloud, render_depth
+from spectral_vs.sim.scene import PlacedObject, SceneParams, build_scene
+
+#: Links of the iiwa chain in pybullet_data's kuka_iiwa/model.urdf.
+BASE_LINK = "lbr_iiwa_link_0"
+TIP_LINK = "lbr_iiwa_link_7"
+
+#: A configuration whose camera looks straight down at the clutter from 0.55 m above the
+#: table (camera at about (0.6, 0, 0.55) m in the base frame), rad.
+HOME_Q: tuple[float, ...] = (-0.1875, 0.3408, 0.2521, -1.4288, -0.085, 1.3826, -1.5042)
+
+
+def iiwa_urdf_path() -> Path:
+    """Path of the iiwa URDF shipped with ``pybullet_data``."""
+    return Path(pybullet_data.getDataPath()) / "kuka_iiwa" / "model.urdf"
+
+
+def default_T_tip_camera() -> np.ndarray:
+    """The camera mount on ``lbr_iiwa_link_7``: axes parallel to the flange frame (optical
+    axis along the flange normal, +Z of link 7), centre 5 cm in front of the link frame
+    (the flange face is at 4.5 cm) and 7 cm off the axis along -Y, so that no part of the
+    robot is in view and joint 7 moves the camera as on a real wrist mount."""
+    T = np.eye(4)
+    T[:3, 3] = (0.0, -0.07, 0.05)
+    return T
+
+
+@dataclass
+class SimParams:
+    """The simulation.
+
+    Attributes
+    ----------
+    mode : {"kinematic", "dynamic"}
+        ``"kinematic"``: joints integrate the commanded velocities exactly
+        (``resetJointState``), deterministic, for tests. ``"dynamic"``: PyBullet velocity
+        motors with torque limits, ``stepSimulation`` at ``time_step``, gravity on.
+    time_step : float
+        Physics step in dynamic mode, s.
+    max_joint_speed : float
+        Speed the simulated drives saturate at, rad/s (each joint clamped separately, as
+        hardware does; the URDF's 10 rad/s is not a real iiwa's 1.5-2.3 rad/s).
+    max_joint_torque : float
+        Torque limit of every motor in dynamic mode, N m (the URDF gives 300).
+    q_start : tuple of float
+        Joint positions at construction, rad.
+    T_tip_camera : ndarray, shape (4, 4)
+        Pose of the camera frame (Z forward, X right, Y down) in ``lbr_iiwa_link_7``.
+    camera : CameraParams
+        Intrinsics, depth noise and normal estimation.
+    scene : SceneParams
+        Table and clutter.
+    """
+
+    mode: Literal["kinematic", "dynamic"] = "kinematic"
+    time_step: float = 1.0 / 240.0
+    max_joint_speed: float = 1.5
+    max_joint_torque: float = 300.0
+    q_start: tuple[float, ...] = HOME_Q
+    T_tip_camera: np.ndarray = field(default_factory=default_T_tip_camera)
+    camera: CameraParams = field(default_factory=CameraParams)
+    scene: SceneParams = field(default_factory=SceneParams)
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("kinematic", "dynamic"):
+            raise ValueError(f"mode must be 'kinematic' or 'dynamic', got {self.mode!r}")
+        if (
+            not self.time_step > 0.0
+            or not self.max_joint_speed > 0.0
+            or not self.max_joint_torque > 0.0
+        ):
+            raise ValueError("time_step, max_joint_speed and max_joint_torque must be > 0")
+
+
+def pose_matrix(position, quaternion) -> np.ndarray:
+    """4 x 4 transform from a PyBullet position and (x, y, z, w) quaternion.
+
+    PyBullet's quaternions are unit length only to float precision (about 1e-7); the
+    quaternion is normalised so that the rotation is orthonormal to double precision."""
+    x, y, z, w = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)
+    T = np.eye(4)
+    T[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    T[:3, 3] = position
+    return T
+
+
+class PyBulletRobot:
+    """The iiwa on the table with its wrist camera, in its own PyBullet DIRECT client.
+
+    The robot base frame is the world frame. Use as a context manager, or call
+    :meth:`close`, to free the physics server.
+
+    Parameters
+    ----------
+    params : SimParams
+        The simulation; defaults to a kinematic simulation at :data:`HOME_Q`.
+    """
+
+    def __init__(self, params: SimParams | None = None) -> None:
+        self.params = params if params is not None else SimParams()
+        self._client = BulletClient(connection_mode=pybullet.DIRECT)
+        self._client.setGravity(0.0, 0.0, -9.81)
+        self._client.setTimeStep(self.params.time_step)
+        self.objects: list[PlacedObject] = build_scene(self._client, self.params.scene)
+        self.robot_id = self._client.loadURDF(
+            str(iiwa_urdf_path()), basePosition=[0.0, 0.0, 0.0], useFixedBase=True
+        )
+        self.kinematics = Kinematics(
+            iiwa_urdf_path(), BASE_LINK, TIP_LINK, self.params.T_tip_camera
+        )
+        self._joints = self._movable_joints()
+        self._tip_index = self._link_index(TIP_LINK)
+        self._rng = np.random.default_rng(self.params.camera.noise.seed)
+        self._time = 0.0
+        self.reset_joint_positions(self.params.q_start)
+
+    # --- RobotInterface --------------------------------------------------------------
+
+    def joint_positions(self) -> np.ndarray:
+        """Current joint positions, shape (7,), rad."""
+        states = self._client.getJointStates(self.robot_id, self._joints)
+        return np.array([state[0] for state in states])
+
+    def send_joint_velocities(self, q_dot: np.ndarray, dt: float) -> None:
+        """Apply joint velocities for ``dt`` seconds of simulated time.
+
+        Each joint is clamped to ``max_joint_speed``. Kinematic mode integrates
+        ``q + q_dot dt`` exactly and stops at the position limits; dynamic mode sets the
+        velocity motors and steps the physics ``round(dt / time_step)`` times (at least 1).
+        """
+        q_dot = self._checked_velocities(q_dot)
+        if not dt > 0.0 or not math.isfinite(dt):
+            raise ValueError(f"dt must be finite and > 0, got {dt}")
+        if self.params.mode == "kinematic":
+            self._integrate(q_dot, dt)
+        else:
+            self._step_dynamics(q_dot, dt)
+
+    def capture(self) -> PointCloud:
+        """The wrist camera's point cloud (camera frame, normals toward the camera)."""
+        return depth_to_cloud(
+            self.capture_depth(), self.params.camera.intrinsics, self.params.camera.normals
+        )
+
+    def stop(self) -> None:
+        """Zero velocity: motors hold (dynamic mode); joint velocities cleared (kinematic)."""
+        if self.params.mode == "dynamic":
+            self._set_motor_velocities(np.zeros(len(self._joints)))
+        else:
+            for joint, q in zip(self._joints, self.joint_positions(), strict=True):
+                self._client.resetJointState(self.robot_id, joint, q, 0.0)
+
+    def time(self) -> float:
+        """Simulated time since construction, s."""
+        return self._time
+
+    # --- Simulation extras -----------------------------------------------------------
+
+    @property
+    def client(self):
+        """The ``BulletClient`` of this simulation."""
+        return self._client
+
+    def reset_joint_positions(self, q: np.ndarray) -> None:
+        """Teleport the arm to ``q`` (rad) at rest; the motors then hold it."""
+        q = np.asarray(q, dtype=float)
+        if q.shape != (len(self._joints),) or not np.all(np.isfinite(q)):
+            raise ValueError(f"q must be {len(self._joints)} finite joint positions, got {q!r}")
+        for joint, value in zip(self._joints, q, strict=True):
+            self._client.resetJointState(self.robot_id, joint, float(value), 0.0)
+        self._set_motor_velocities(np.zeros(len(self._joints)))
+
+    def capture_depth(self) -> np.ndarray:
+        """The planar depth image (H, W), metres, NaN where missing; noisy if configured."""
+        depth = render_depth(self._client, self.camera_pose(), self.params.camera.intrinsics)
+        noise = self.params.camera.noise
+        return noise.apply(depth, self._rng) if noise.enabled else depth
+
+    def tip_pose(self) -> np.ndarray:
+        """T_world_tip of ``lbr_iiwa_link_7`` as PyBullet has it (URDF link frame)."""
+        state = self._client.getLinkState(
+            self.robot_id, self._tip_index, computeForwardKinematics=True
+        )
+        return pose_matrix(state[4], state[5])
+
+    def camera_pose(self) -> np.ndarray:
+        """T_world_camera from PyBullet's link state: the ground truth of the simulation."""
+        return self.tip_pose() @ self.params.T_tip_camera
+
+    def T_base_camera(self, q: np.ndarray | None = None) -> np.ndarray:
+        """T_base_camera from the KDL kinematics at ``q`` (the current joints by default).
+        The base frame is the world frame."""
+        return self.kinematics.forward(self.joint_positions() if q is None else q)
+
+    def close(self) -> None:
+        """Disconnect the physics server (idempotent)."""
+        if self._client is not None:
+            self._client.disconnect()
+            self._client = None
+
+    def __enter__(self) -> PyBulletRobot:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # --- Internals -------------------------------------------------------------------
+
+    def _movable_joints(self) -> list[int]:
+        names = self.kinematics.joint_names
+        by_name = {}
+        for index in range(self._client.getNumJoints(self.robot_id)):
+            info = self._client.getJointInfo(self.robot_id, index)
+            if info[2] != pybullet.JOINT_FIXED:
+                by_name[info[1].decode()] = index
+        return [by_name[name] for name in names]
+
+    def _link_index(self, link_name: str) -> int:
+        for index in range(self._client.getNumJoints(self.robot_id)):
+            if self._client.getJointInfo(self.robot_id, index)[12].decode() == link_name:
+                return index
+        raise ValueError(f"no link named {link_name!r}")
+
+    def _checked_velocities(self, q_dot) -> np.ndarray:
+        q_dot = np.asarray(q_dot, dtype=float)
+        if q_dot.shape != (len(self._joints),) or not np.all(np.isfinite(q_dot)):
+            raise ValueError(
+                f"q_dot must be {len(self._joints)} finite joint velocities, got {q_dot!r}"
+            )
+        return np.clip(q_dot, -self.params.max_joint_speed, self.params.max_joint_speed)
+
+    def _integrate(self, q_dot: np.ndarray, dt: float) -> None:
+        k = self.kinematics
+        q = np.clip(self.joint_positions() + q_dot * dt, k.lower_limits, k.upper_limits)
+        for joint, value, velocity in zip(self._joints, q, q_dot, strict=True):
+            self._client.resetJointState(self.robot_id, joint, float(value), float(velocity))
+        self._time += dt
+
+    def _step_dynamics(self, q_dot: np.ndarray, dt: float) -> None:
+        self._set_motor_velocities(q_dot)
+        steps = max(1, round(dt / self.params.time_step))
+        for _ in range(steps):
+            self._client.stepSimulation()
+        self._time += steps * self.params.time_step
+
+    def _set_motor_velocities(self, q_dot: np.ndarray) -> None:
+        self._client.setJointMotorControlArray(
+            self.robot_id,
+            self._joints,
+            pybullet.VELOCITY_CONTROL,
+            targetVelocities=q_dot.tolist(),
+            forces=[self.params.max_joint_torque] * len(self._joints),
+        )
