@@ -62,6 +62,8 @@ inline Transform to_transform(const py::handle& object, const char* argument) {
 
 void define_representation(py::module_& m);
 void define_translation(py::module_& m);
+void define_rotation(py::module_& m);
+void define_alignment(py::module_& m);
 void define_kinematics(py::module_& m);
 
 }  // namespace spectral_vs::python

@@ -1,0 +1,140 @@
+// Bindings of the aligner (paper, section II-D and Algorithm 1).
+#include "conversions.hpp"
+
+#include <spectral_vs/alignment/aligner.hpp>
+
+#include <pybind11/stl.h>
+
+#include <sstream>
+
+namespace spectral_vs::python {
+
+namespace {
+
+template <typename Enum>
+Enum parse(const std::string& name, std::initializer_list<std::pair<const char*, Enum>> choices,
+           const char* argument) {
+  std::string valid;
+  for (const auto& [text, value] : choices) {
+    if (name == text) return value;
+    valid += (valid.empty() ? "'" : ", '") + std::string(text) + "'";
+  }
+  throw py::value_error(std::string(argument) + " must be one of " + valid + ", got '" + name + "'");
+}
+
+std::string occupancy_name(Occupancy o) {
+  return o == Occupancy::binary ? "binary" : o == Occupancy::count ? "count" : "trilinear";
+}
+
+}  // namespace
+
+void define_alignment(py::module_& m) {
+  py::class_<AlignParams>(m, "AlignParams", R"doc(
+Settings of :func:`align`; every field has the default measured best.
+
+Attributes
+----------
+voxel_size : float
+    Voxel edge of the translation grid, metres (default 0.008).
+bandwidth : int
+    B: EGI harmonics of degree l < B are correlated (default 16).
+translation_gain, rotation_gain : float
+    lambda_t in (0, 1] and lambda_r of eq. (16). With Newton steps lambda_r is the share
+    of the Newton step in (0, 1]; with gradient steps, radians per unit gradient.
+rotation_step : str
+    'newton' (default) or 'gradient' (the paper's law).
+max_rotation_step : float
+    Largest rotation of one iteration, radians.
+tolerance : float
+    eps_g of eq. (17): |translation step| (voxels) + |grad C| below which it stops.
+max_iterations : int
+initial_guess : ndarray (4, 4)
+    T_scene_model to start from (ignored for the rotation when global_search is on).
+global_search : bool
+    Start from the best rotations of the SO(3) search (default True).
+hypotheses : int
+    Rotations of the global search that are refined and verified.
+subvoxel : bool
+    Sub-voxel refinement of the phase-correlation peak.
+occupancy : str
+    'trilinear' (default), 'binary' (the paper) or 'count'.
+egi_method : str
+    'projection' (default) or 'histogram' (the paper).
+threads : int
+max_voxels : int
+    Refuse translation grids with more voxels than this.
+)doc")
+      .def(py::init<>())
+      .def_readwrite("voxel_size", &AlignParams::voxel_size)
+      .def_readwrite("bandwidth", &AlignParams::bandwidth)
+      .def_readwrite("translation_gain", &AlignParams::translation_gain)
+      .def_readwrite("rotation_gain", &AlignParams::rotation_gain)
+      .def_property("rotation_step",
+                    [](const AlignParams& p) { return p.rotation_step == RotationStep::newton ? "newton" : "gradient"; },
+                    [](AlignParams& p, const std::string& s) {
+                      p.rotation_step = parse<RotationStep>(
+                          s, {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}, "rotation_step");
+                    })
+      .def_readwrite("max_rotation_step", &AlignParams::max_rotation_step)
+      .def_readwrite("tolerance", &AlignParams::tolerance)
+      .def_readwrite("max_iterations", &AlignParams::max_iterations)
+      .def_property("initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },
+                    [](AlignParams& p, const py::handle& T) { p.initial_guess = to_transform(T, "initial_guess"); })
+      .def_readwrite("global_search", &AlignParams::global_search)
+      .def_readwrite("hypotheses", &AlignParams::hypotheses)
+      .def_readwrite("subvoxel", &AlignParams::subvoxel)
+      .def_property("occupancy", [](const AlignParams& p) { return occupancy_name(p.occupancy); },
+                    [](AlignParams& p, const std::string& s) {
+                      p.occupancy = parse<Occupancy>(s, {{"binary", Occupancy::binary},
+                                                         {"count", Occupancy::count},
+                                                         {"trilinear", Occupancy::trilinear}}, "occupancy");
+                    })
+      .def_property("egi_method",
+                    [](const AlignParams& p) { return p.egi_method == EgiMethod::projection ? "projection" : "histogram"; },
+                    [](AlignParams& p, const std::string& s) {
+                      p.egi_method = parse<EgiMethod>(
+                          s, {{"projection", EgiMethod::projection}, {"histogram", EgiMethod::histogram}}, "egi_method");
+                    })
+      .def_readwrite("threads", &AlignParams::threads)
+      .def_property("max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
+                    [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
+      .def("__repr__", [](const AlignParams& p) {
+        std::ostringstream out;
+        out << "AlignParams(voxel_size=" << p.voxel_size << ", bandwidth=" << p.bandwidth
+            << ", global_search=" << (p.global_search ? "True" : "False") << ", hypotheses=" << p.hypotheses
+            << ", max_iterations=" << p.max_iterations << ")";
+        return out.str();
+      });
+
+  py::class_<AlignIteration>(m, "AlignIteration", "One iteration of Algorithm 1, after its update.")
+      .def_readonly("translation_cost", &AlignIteration::translation_cost, "J_t of eq. (9), voxel units.")
+      .def_readonly("rotation_cost", &AlignIteration::rotation_cost, "J_r of eq. (16), normalised.")
+      .def_readonly("translation_step", &AlignIteration::translation_step, "|lambda_t shift|, voxels.")
+      .def_readonly("rotation_gradient", &AlignIteration::rotation_gradient, "|grad C|, per radian.")
+      .def_readonly("correlation", &AlignIteration::correlation, "Normalised EGI correlation.")
+      .def_readonly("translation_peak", &AlignIteration::translation_peak, "Phase-correlation peak.")
+      .def_property_readonly("T_scene_model", [](const AlignIteration& i) { return Eigen::Matrix4d(i.T_scene_model); });
+
+  py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
+      .def_property_readonly("T_scene_model", [](const AlignResult& r) { return Eigen::Matrix4d(r.T_scene_model); },
+                             "4x4 transform mapping model coordinates into the scene.")
+      .def_readonly("converged", &AlignResult::converged)
+      .def_readonly("iterations", &AlignResult::iterations)
+      .def_readonly("fitness", &AlignResult::fitness,
+                    "Share of the model's occupied voxels next to scene points, in [0, 1].")
+      .def_readonly("correlation", &AlignResult::correlation)
+      .def_readonly("translation_peak", &AlignResult::translation_peak)
+      .def_readonly("hypothesis", &AlignResult::hypothesis)
+      .def_readonly("history", &AlignResult::history)
+      .def("__repr__", [](const AlignResult& r) {
+        std::ostringstream out;
+        out << "AlignResult(converged=" << (r.converged ? "True" : "False") << ", iterations=" << r.iterations
+            << ", fitness=" << r.fitness << ", correlation=" << r.correlation << ")";
+        return out.str();
+      });
+
+  m.def("_align", &align, py::arg("model"), py::arg("scene"), py::arg("params"),
+        py::call_guard<py::gil_scoped_release>(), "Algorithm 1 on clouds with normals; see spectral_vs.align.");
+}
+
+}  // namespace spectral_vs::python

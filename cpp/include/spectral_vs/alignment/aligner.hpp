@@ -1,0 +1,83 @@
+#pragma once
+/// @file aligner.hpp
+/// Model-to-scene alignment: the decoupled controller of Algorithm 1 (paper, section
+/// II-D, eq. 16-17) and, beyond the paper, a global rotation search that makes the
+/// result independent of the initial rotation.
+
+#include <spectral_vs/representation/point_cloud.hpp>
+#include <spectral_vs/representation/voxel_grid.hpp>
+#include <spectral_vs/rotation/egi_coefficients.hpp>
+
+#include <cstddef>
+#include <vector>
+
+namespace spectral_vs {
+
+/// How a rotation step follows the correlation C(R) of eq. (12).
+enum class RotationStep {
+  gradient,  ///< The paper's law: R <- R exp(lambda_r hat(grad C)).
+  newton,    ///< R <- R exp(lambda_r hat(-H^-1 grad C)) where the Hessian H is negative
+             ///< definite, the gradient law elsewhere: the same fixed point, fewer iterations.
+};
+
+/// Settings of `align`. Defaults are the ones measured best here (docs/experiments.md).
+struct AlignParams {
+  double voxel_size = 0.008;   ///< Voxel edge r of the translation grid, metres.
+  int bandwidth = 16;          ///< B: EGI harmonics of degree l < B are correlated.
+  double translation_gain = 0.5;  ///< lambda_t in (0, 1]: share of the phase-correlation
+                                  ///< shift applied per iteration (eq. 16).
+  double rotation_gain = 0.5;  ///< lambda_r > 0. Newton: share of the Newton step, in (0, 1].
+                               ///< Gradient: radians per unit of normalised gradient.
+  RotationStep rotation_step = RotationStep::newton;
+  double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
+  double tolerance = 0.02;     ///< eps_g of eq. (17): stop when |translation step| in voxels
+                               ///< plus |grad C| (normalised correlation per radian) < eps_g.
+  int max_iterations = 100;    ///< Iterations of Algorithm 1 per run, >= 1.
+  Transform initial_guess = Transform::Identity();  ///< T_scene_model to start from.
+  bool global_search = true;   ///< Start from the best rotations of the SO(3) search
+                               ///< (beyond the paper) instead of the initial guess's.
+  int hypotheses = 16;         ///< Rotations of the global search that are refined and verified:
+                               ///< enough to hold the true one among the near-equal maxima of
+                               ///< an object with symmetric faces.
+  bool subvoxel = true;        ///< Sub-voxel refinement of the phase-correlation peak.
+  Occupancy occupancy = Occupancy::trilinear;  ///< Voxel values (the paper: binary).
+  EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
+  int threads = 1;             ///< Threads for FFTW and the SO(3) search, >= 1.
+  GridLimits limits = {};      ///< Refuse translation grids over this many voxels.
+};
+
+/// One iteration of Algorithm 1, recorded after its update.
+struct AlignIteration {
+  double translation_cost = 0.0;   ///< J_t of eq. (9) on the voxel grids, voxel units.
+  double rotation_cost = 0.0;      ///< J_r of eq. (16) on normalised EGI coefficients.
+  double translation_step = 0.0;   ///< |lambda_t * phase-correlation shift|, voxels.
+  double rotation_gradient = 0.0;  ///< |grad C| of eq. (15), normalised correlation per radian.
+  double correlation = 0.0;        ///< Normalised EGI correlation C(R) in [-1, 1].
+  double translation_peak = 0.0;   ///< Phase-correlation peak height in [0, 1].
+  Transform T_scene_model = Transform::Identity();  ///< Pose after the update.
+};
+
+/// Outcome of `align`.
+struct AlignResult {
+  Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
+  bool converged = false;      ///< The stop rule (eq. 17) held before max_iterations.
+  int iterations = 0;          ///< Iterations of Algorithm 1 in the kept run.
+  /// Fraction of the model's occupied voxels that fall on occupied scene voxels (within
+  /// one voxel) at the final pose, in [0, 1]: high for a correct alignment, low for a
+  /// wrong one. A single-view scan of an object shows about half of a full model.
+  double fitness = 0.0;
+  double correlation = 0.0;       ///< Final normalised EGI correlation C(R).
+  double translation_peak = 0.0;  ///< Final phase-correlation peak height.
+  int hypothesis = 0;             ///< Index of the kept global-search hypothesis (0 without).
+  std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
+};
+
+/// Aligns `model` onto `scene`: the returned T_scene_model moves the model's points onto
+/// the scene. Both clouds need normals. Rotation is about the model's centroid.
+/// @throws std::invalid_argument for an empty cloud, missing normals, non-finite or
+///         out-of-range parameters, an initial guess that is not a rigid transform, or a
+///         translation grid over `params.limits`. Not converging is not an error: it
+///         returns converged = false.
+AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignParams& params = {});
+
+}  // namespace spectral_vs

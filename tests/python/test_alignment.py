@@ -1,0 +1,131 @@
+"""The aligner (Algorithm 1) from Python: accuracy in degrees and millimetres, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import spectral_vs as svs
+
+
+def rotation(axis: np.ndarray, angle_deg: float) -> np.ndarray:
+    """Rodrigues' formula: an independent construction of the ground truth."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    a = np.radians(angle_deg)
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+def box_with_ball(rng: np.random.Generator, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """A 0.24 x 0.12 x 0.08 m box sampled by area, with a 6 cm ball on one face."""
+    half = np.array([0.12, 0.06, 0.04])
+    areas = np.array([half[1] * half[2], half[0] * half[2], half[0] * half[1]])
+    axis = rng.choice(3, size=samples, p=areas / areas.sum())
+    u = rng.uniform(-1, 1, size=(samples, 3))
+    rows = np.arange(samples)
+    u[rows, axis] = np.sign(u[rows, axis])
+    normals = np.zeros((samples, 3))
+    normals[rows, axis] = u[rows, axis]
+    points = u * half
+    ball = rng.normal(size=(samples // 2, 3))
+    ball /= np.linalg.norm(ball, axis=1, keepdims=True)
+    ball_points = np.array([0.07, 0.0, 0.04 + 0.03]) + 0.03 * ball
+    keep = ball_points[:, 2] > 0.04  # the part of the ball above the box's top face
+    return np.vstack([points, ball_points[keep]]), np.vstack([normals, ball[keep]])
+
+
+def make_case(rng, angle_deg):
+    points, normals = box_with_ball(rng, 6000)
+    R = rotation(rng.normal(size=3), angle_deg)
+    t = rng.uniform(-0.1, 0.1, size=3)
+    scene_points, scene_normals = box_with_ball(rng, 6000)  # an independent resampling
+    scene_points = scene_points + rng.normal(0, 0.001, scene_points.shape)
+    model = svs.PointCloud(points, normals)
+    scene = svs.PointCloud(scene_points @ R.T + t, scene_normals @ R.T)
+    return model, scene, R, t
+
+
+def errors(result, R, t):
+    T = np.asarray(result.T_scene_model)
+    cos = np.clip((np.trace(T[:3, :3].T @ R) - 1) / 2, -1, 1)
+    return np.degrees(np.arccos(cos)), 1000 * np.linalg.norm(T[:3, 3] - t)
+
+
+@pytest.mark.parametrize("angle", [5, 15])
+def test_paper_mode_converges_from_small_rotations(angle):
+    rng = np.random.default_rng(angle)
+    model, scene, R, t = make_case(rng, angle)
+    result = svs.align(model, scene, global_search=False, downsample=False)
+    rotation_error, translation_error = errors(result, R, t)
+    assert result.converged
+    assert rotation_error < 1.0
+    assert translation_error < 2.0
+    assert result.fitness > 0.9
+    assert len(result.history) == result.iterations
+    # The costs of eq. (9) and (16) fall from the first iteration to the last.
+    assert result.history[-1].rotation_cost <= result.history[0].rotation_cost
+    assert result.history[-1].translation_cost < result.history[0].translation_cost
+
+
+@pytest.mark.parametrize("angle", [60, 120, 180])
+def test_global_search_recovers_large_rotations(angle):
+    rng = np.random.default_rng(100 + angle)
+    model, scene, R, t = make_case(rng, angle)
+    result = svs.align(model, scene, downsample=False)
+    rotation_error, translation_error = errors(result, R, t)
+    assert rotation_error < 1.0
+    assert translation_error < 2.0
+
+
+def test_fitness_tells_success_from_failure():
+    rng = np.random.default_rng(7)
+    model, scene, R, t = make_case(rng, 120)
+    stuck = svs.align(model, scene, global_search=False, downsample=False)  # beyond the paper's basin
+    found = svs.align(model, scene, downsample=False)
+    assert errors(stuck, R, t)[0] > 5.0
+    assert errors(found, R, t)[0] < 1.0
+    assert found.fitness > 0.9 > 0.75 > stuck.fitness
+
+
+def test_same_input_gives_the_same_pose():
+    rng = np.random.default_rng(8)
+    model, scene, _, _ = make_case(rng, 40)
+    first = svs.align(model, scene, downsample=False)
+    second = svs.align(model, scene, downsample=False)
+    np.testing.assert_array_equal(first.T_scene_model, second.T_scene_model)
+
+
+def test_max_iterations_reports_not_converged():
+    rng = np.random.default_rng(9)
+    model, scene, _, _ = make_case(rng, 15)
+    result = svs.align(model, scene, global_search=False, max_iterations=1, downsample=False)
+    assert not result.converged
+    assert result.iterations == 1
+
+
+def test_arrays_without_normals_are_accepted(rng):
+    points, _ = box_with_ball(rng, 4000)
+    result = svs.align(points, points + [0.01, 0.0, 0.0], viewpoint=(0.0, 0.0, 1.0))
+    assert np.linalg.norm(np.asarray(result.T_scene_model)[:3, 3] - [0.01, 0, 0]) < 0.002
+
+
+def test_bad_input():
+    rng = np.random.default_rng(10)
+    model, scene, _, _ = make_case(rng, 10)
+    with pytest.raises(ValueError, match="model is empty"):
+        svs.align(svs.PointCloud(np.zeros((0, 3))), scene, downsample=False)
+    lonely = svs.PointCloud(np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]))  # no normal can be fitted
+    with pytest.raises(ValueError, match="no point has enough neighbours"):
+        svs.align(model, lonely, downsample=False)
+    with pytest.raises(ValueError, match="voxel_size must be finite and > 0"):
+        svs.align(model, scene, voxel_size=-1.0, downsample=False)
+    with pytest.raises(ValueError, match="translation_gain must be in"):
+        svs.align(model, scene, translation_gain=1.5, downsample=False)
+    with pytest.raises(ValueError, match="initial_guess is not a rigid transform"):
+        svs.align(model, scene, initial_guess=np.diag([2.0, 1, 1, 1]), downsample=False)
+    with pytest.raises(ValueError, match="exceeds the limit of 1000 voxels"):
+        svs.align(model, scene, max_voxels=1000, downsample=False)
+    with pytest.raises(ValueError, match="unknown alignment setting 'gain'"):
+        svs.align(model, scene, gain=0.1)
+    with pytest.raises(ValueError, match="model must be a PointCloud or an"):
+        svs.align(np.zeros((5, 4)), scene)
