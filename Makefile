@@ -56,6 +56,7 @@ install: system-deps venv
 
 bench: install
 	$(PY) benchmarks/translation_benchmark.py --build-dir $(BUILD_DIR)
+	$(PY) benchmarks/rotation_benchmark.py
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks

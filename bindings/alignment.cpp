@@ -11,20 +11,8 @@ namespace spectral_vs::python {
 
 namespace {
 
-template <typename Enum>
-Enum parse(const std::string& name, std::initializer_list<std::pair<const char*, Enum>> choices,
-           const char* argument) {
-  std::string valid;
-  for (const auto& [text, value] : choices) {
-    if (name == text) return value;
-    valid += (valid.empty() ? "'" : ", '") + std::string(text) + "'";
-  }
-  throw py::value_error(std::string(argument) + " must be one of " + valid + ", got '" + name + "'");
-}
-
-std::string occupancy_name(Occupancy o) {
-  return o == Occupancy::binary ? "binary" : o == Occupancy::count ? "count" : "trilinear";
-}
+constexpr Choices<RotationStep, 2> kRotationSteps{
+    {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}};
 
 }  // namespace
 
@@ -70,10 +58,9 @@ max_voxels : int
       .def_readwrite("translation_gain", &AlignParams::translation_gain)
       .def_readwrite("rotation_gain", &AlignParams::rotation_gain)
       .def_property("rotation_step",
-                    [](const AlignParams& p) { return p.rotation_step == RotationStep::newton ? "newton" : "gradient"; },
+                    [](const AlignParams& p) { return choice_name(p.rotation_step, kRotationSteps); },
                     [](AlignParams& p, const std::string& s) {
-                      p.rotation_step = parse<RotationStep>(
-                          s, {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}, "rotation_step");
+                      p.rotation_step = parse_choice(s, kRotationSteps, "rotation_step");
                     })
       .def_readwrite("max_rotation_step", &AlignParams::max_rotation_step)
       .def_readwrite("tolerance", &AlignParams::tolerance)
@@ -83,17 +70,13 @@ max_voxels : int
       .def_readwrite("global_search", &AlignParams::global_search)
       .def_readwrite("hypotheses", &AlignParams::hypotheses)
       .def_readwrite("subvoxel", &AlignParams::subvoxel)
-      .def_property("occupancy", [](const AlignParams& p) { return occupancy_name(p.occupancy); },
+      .def_property("occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
                     [](AlignParams& p, const std::string& s) {
-                      p.occupancy = parse<Occupancy>(s, {{"binary", Occupancy::binary},
-                                                         {"count", Occupancy::count},
-                                                         {"trilinear", Occupancy::trilinear}}, "occupancy");
+                      p.occupancy = parse_choice(s, kOccupancies, "occupancy");
                     })
-      .def_property("egi_method",
-                    [](const AlignParams& p) { return p.egi_method == EgiMethod::projection ? "projection" : "histogram"; },
+      .def_property("egi_method", [](const AlignParams& p) { return choice_name(p.egi_method, kEgiMethods); },
                     [](AlignParams& p, const std::string& s) {
-                      p.egi_method = parse<EgiMethod>(
-                          s, {{"projection", EgiMethod::projection}, {"histogram", EgiMethod::histogram}}, "egi_method");
+                      p.egi_method = parse_choice(s, kEgiMethods, "egi_method");
                     })
       .def_readwrite("threads", &AlignParams::threads)
       .def_property("max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },

@@ -3,12 +3,16 @@
 // finiteness errors name the argument, as ValueError.
 
 #include <spectral_vs/representation/point_cloud.hpp>
+#include <spectral_vs/representation/voxel_grid.hpp>
+#include <spectral_vs/rotation/egi_coefficients.hpp>
 
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <array>
 #include <string>
+#include <utility>
 
 namespace spectral_vs::python {
 
@@ -58,6 +62,46 @@ inline Transform to_transform(const py::handle& object, const char* argument) {
     for (int c = 0; c < 4; ++c) T(r, c) = array.at(r, c);
   require_rigid_transform(T, argument);
   return T;
+}
+
+/// The names a string setting accepts and the enum value of each.
+template <typename Enum, std::size_t N>
+using Choices = std::array<std::pair<const char*, Enum>, N>;
+
+/// The value named `name`; otherwise ValueError "<argument> must be 'a', 'b' or 'c', got 'x'".
+template <typename Enum, std::size_t N>
+Enum parse_choice(const std::string& name, const Choices<Enum, N>& choices, const char* argument) {
+  std::string valid;
+  for (std::size_t i = 0; i < N; ++i) {
+    if (name == choices[i].first) return choices[i].second;
+    valid += (i == 0 ? "'" : (i + 1 == N ? " or '" : ", '")) + std::string(choices[i].first) + "'";
+  }
+  throw py::value_error(std::string(argument) + " must be " + valid + ", got '" + name + "'");
+}
+
+/// The name of `value` among `choices`.
+template <typename Enum, std::size_t N>
+const char* choice_name(Enum value, const Choices<Enum, N>& choices) {
+  for (const auto& [name, choice] : choices) {
+    if (choice == value) return name;
+  }
+  return "unknown";
+}
+
+inline constexpr Choices<Occupancy, 3> kOccupancies{{{"binary", Occupancy::binary},
+                                                     {"count", Occupancy::count},
+                                                     {"trilinear", Occupancy::trilinear}}};
+inline constexpr Choices<EgiMethod, 2> kEgiMethods{{{"projection", EgiMethod::projection},
+                                                    {"histogram", EgiMethod::histogram}}};
+
+/// The normals of a PointCloud (which must have them) or an (N, 3) float array of normals.
+inline Points normals_of(const py::handle& object) {
+  if (py::isinstance<PointCloud>(object)) {
+    const auto& cloud = object.cast<const PointCloud&>();
+    require_normals(cloud, "cloud");
+    return cloud.normals();
+  }
+  return to_points(object, "normals");
 }
 
 void define_representation(py::module_& m);

@@ -27,25 +27,12 @@ PointCloud make_cloud(const py::handle& points, const py::handle& normals, bool 
   return PointCloud(std::move(p), std::move(n));
 }
 
-NormalOrientation parse_orientation(const std::string& name) {
-  if (name == "toward_viewpoint") return NormalOrientation::toward_viewpoint;
-  if (name == "outward") return NormalOrientation::outward;
-  throw py::value_error("orientation must be 'toward_viewpoint' or 'outward', got '" + name + "'");
-}
+constexpr Choices<NormalOrientation, 2> kOrientations{
+    {{"toward_viewpoint", NormalOrientation::toward_viewpoint}, {"outward", NormalOrientation::outward}}};
 
-Occupancy parse_occupancy(const std::string& name) {
-  if (name == "binary") return Occupancy::binary;
-  if (name == "count") return Occupancy::count;
-  if (name == "trilinear") return Occupancy::trilinear;
-  throw py::value_error("occupancy must be 'binary', 'count' or 'trilinear', got '" + name + "'");
-}
-
-PcdEncoding parse_encoding(const std::string& name) {
-  if (name == "ascii") return PcdEncoding::ascii;
-  if (name == "binary") return PcdEncoding::binary;
-  if (name == "binary_compressed") return PcdEncoding::binary_compressed;
-  throw py::value_error("encoding must be 'ascii', 'binary' or 'binary_compressed', got '" + name + "'");
-}
+constexpr Choices<PcdEncoding, 3> kEncodings{{{"ascii", PcdEncoding::ascii},
+                                              {"binary", PcdEncoding::binary},
+                                              {"binary_compressed", PcdEncoding::binary_compressed}}};
 
 void require_file(const std::filesystem::path& path) {
   std::error_code error;
@@ -53,15 +40,6 @@ void require_file(const std::filesystem::path& path) {
     PyErr_SetString(PyExc_FileNotFoundError, ("path: no such file: " + path.string()).c_str());
     throw py::error_already_set();
   }
-}
-
-Points normals_of(const py::handle& object) {
-  if (py::isinstance<PointCloud>(object)) {
-    const auto& cloud = object.cast<const PointCloud&>();
-    require_normals(cloud, "cloud");
-    return cloud.normals();
-  }
-  return to_points(object, "normals");
 }
 
 py::array grid_values(const VoxelGrid& grid, py::handle owner) {
@@ -139,7 +117,7 @@ drop_non_finite : bool
 
   m.def("save_cloud", [](const std::filesystem::path& path, const PointCloud& cloud,
                          const std::string& encoding) {
-    const PcdEncoding parsed = parse_encoding(encoding);
+    const PcdEncoding parsed = parse_choice(encoding, kEncodings, "encoding");
     py::gil_scoped_release release;
     save_cloud(path.string(), cloud, parsed);
   }, py::arg("path"), py::arg("cloud"), py::arg("encoding") = "binary_compressed",
@@ -156,7 +134,7 @@ drop_non_finite : bool
     params.radius = radius;
     params.k_neighbors = k_neighbors;
     params.viewpoint = viewpoint;
-    params.orientation = parse_orientation(orientation);
+    params.orientation = parse_choice(orientation, kOrientations, "orientation");
     params.threads = threads;
     py::gil_scoped_release release;
     return estimate_normals(cloud, params);
@@ -212,7 +190,7 @@ drop_non_finite : bool
 
   m.def("voxelize", [](const PointCloud& cloud, const GridSpec& spec, const std::string& occupancy,
                        std::size_t max_voxels) {
-    const Occupancy parsed = parse_occupancy(occupancy);
+    const Occupancy parsed = parse_choice(occupancy, kOccupancies, "occupancy");
     py::gil_scoped_release release;
     return voxelize(cloud, spec, parsed, GridLimits{max_voxels});
   }, py::arg("cloud"), py::arg("spec"), py::arg("occupancy") = "binary",

@@ -91,21 +91,6 @@ SphereGrid to_grid(const py::handle& object, int bandwidth) {
   return Eigen::Map<const SphereGrid>(array.data(), n, n);
 }
 
-Points normals_of(const py::handle& object) {
-  if (py::isinstance<PointCloud>(object)) {
-    const auto& cloud = object.cast<const PointCloud&>();
-    require_normals(cloud, "cloud");
-    return cloud.normals();
-  }
-  return to_points(object, "normals");
-}
-
-EgiMethod parse_method(const std::string& name) {
-  if (name == "projection") return EgiMethod::projection;
-  if (name == "histogram") return EgiMethod::histogram;
-  throw py::value_error("method must be 'projection' or 'histogram', got '" + name + "'");
-}
-
 py::list matrix_list(const std::vector<Eigen::MatrixXd>& matrices) {
   py::list out;
   for (const auto& m : matrices) out.append(py::cast(Eigen::MatrixXd(m)));
@@ -268,7 +253,7 @@ tuple of three lists of numpy.ndarray
       [](const py::handle& normals_or_cloud, int bandwidth, const std::string& method,
          const py::handle& weights) {
         const Points normals = normals_of(normals_or_cloud);
-        const EgiMethod parsed = parse_method(method);
+        const EgiMethod parsed = parse_choice(method, kEgiMethods, "method");
         std::optional<Eigen::VectorXd> w;
         if (!weights.is_none()) {
           const auto array = float_array(weights, "weights");

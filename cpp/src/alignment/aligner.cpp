@@ -64,11 +64,9 @@ public:
         correlation_(scene_coefficients_, model_coefficients_, params.bandwidth, true),
         spec_(grid_for(scene, start, reach(model), params)),
         phase_(spec_, phase_params(params)) {
-    const VoxelGrid scene_grid = voxelize(scene, spec_, params.occupancy, params.limits);
-    phase_.set_target(scene_grid);
-    scene_energy_ = 0.0;
-    for (float v : scene_grid.values) scene_energy_ += double(v) * v;
-    scene_values_ = scene_grid.values;
+    scene_grid_ = voxelize(scene, spec_, params.occupancy, params.limits);
+    phase_.set_target(scene_grid_);
+    scene_energy_ = grid_energy(scene_grid_);
     mark_scene_neighbourhood(scene);
   }
 
@@ -115,7 +113,8 @@ public:
       record.rotation_gradient = c.gradient.norm();
       record.correlation = c.value;
       record.translation_peak = shift.peak;
-      record.translation_cost = translation_cost_now();
+      record.translation_cost =
+          translation_cost(moving_, scene_grid_, Eigen::Vector3i::Zero(), scene_energy_);
       record.rotation_cost = rotation_cost(scene_coefficients_, model_coefficients_, pose.R,
                                            params_.bandwidth, true);
       record.T_scene_model = transform_of(pose);
@@ -231,22 +230,6 @@ private:
     return omega;
   }
 
-  // J_t of eq. (9) at the current pose (no further shift), summed over the moving grid's
-  // occupied box only: the scene's own energy is constant and precomputed.
-  double translation_cost_now() const {
-    double cross = 0.0, energy = 0.0;
-    if (moving_.empty()) return 0.5 * scene_energy_;
-    for (int i = moving_.occupied_min.x(); i <= moving_.occupied_max.x(); ++i)
-      for (int j = moving_.occupied_min.y(); j <= moving_.occupied_max.y(); ++j)
-        for (int k = moving_.occupied_min.z(); k <= moving_.occupied_max.z(); ++k) {
-          const std::size_t index = linear({i, j, k});
-          const double m = moving_.values[index];
-          energy += m * m;
-          cross += m * scene_values_[index];
-        }
-    return 0.5 * (scene_energy_ + energy - 2.0 * cross);
-  }
-
   AlignParams params_;
   Eigen::Vector3d centroid_;
   Points centred_;
@@ -255,8 +238,8 @@ private:
   So3Correlation correlation_;
   GridSpec spec_;
   PhaseCorrelation phase_;
-  double scene_energy_ = 0.0;
-  std::vector<float> scene_values_;
+  VoxelGrid scene_grid_;
+  double scene_energy_ = 0.0;  // sum of squares of scene_grid_, for J_t
   std::vector<std::uint8_t> scene_near_;
   std::vector<std::uint8_t> marks_;
   Points moved_;

@@ -331,22 +331,35 @@ TranslationEstimate phase_correlation(const VoxelGrid& moving, const VoxelGrid& 
   return correlation.estimate(moving);
 }
 
+double grid_energy(const VoxelGrid& grid) {
+  double energy = 0.0;
+  for (const float v : grid.values) energy += double(v) * v;
+  return energy;
+}
+
+// 0.5 * sum (t - m)^2 = 0.5 * (sum t^2 + sum m^2 - 2 sum t m), where only voxels of the
+// moving grid that land inside the grid contribute the last two terms.
+double translation_cost(const VoxelGrid& moving, const VoxelGrid& target,
+                        const Eigen::Vector3i& shift, double target_energy) {
+  if (moving.spec.dims != target.spec.dims) fail("target: grid dims differ from moving's");
+  double energy = 0.0, cross = 0.0;
+  if (!moving.empty()) {
+    for (int i = moving.occupied_min.x(); i <= moving.occupied_max.x(); ++i)
+      for (int j = moving.occupied_min.y(); j <= moving.occupied_max.y(); ++j)
+        for (int k = moving.occupied_min.z(); k <= moving.occupied_max.z(); ++k) {
+          const Eigen::Vector3i destination = Eigen::Vector3i(i, j, k) + shift;
+          if (!target.spec.contains(destination)) continue;
+          const double m = moving.at(i, j, k);
+          energy += m * m;
+          cross += m * target.at(destination.x(), destination.y(), destination.z());
+        }
+  }
+  return 0.5 * (target_energy + energy - 2.0 * cross);
+}
+
 double translation_cost(const VoxelGrid& moving, const VoxelGrid& target,
                         const Eigen::Vector3i& shift) {
-  if (moving.spec.dims != target.spec.dims) fail("target: grid dims differ from moving's");
-  const auto& dims = target.spec.dims;
-  double cost = 0.0;
-  for (int i = 0; i < dims.x(); ++i) {
-    for (int j = 0; j < dims.y(); ++j) {
-      for (int k = 0; k < dims.z(); ++k) {
-        const Eigen::Vector3i source = Eigen::Vector3i(i, j, k) - shift;
-        const double m = moving.spec.contains(source) ? moving.at(source.x(), source.y(), source.z()) : 0.0;
-        const double difference = target.at(i, j, k) - m;
-        cost += difference * difference;
-      }
-    }
-  }
-  return 0.5 * cost;
+  return translation_cost(moving, target, shift, grid_energy(target));
 }
 
 }  // namespace spectral_vs

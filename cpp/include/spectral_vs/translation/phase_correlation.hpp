@@ -67,4 +67,13 @@ TranslationEstimate phase_correlation(const VoxelGrid& moving, const VoxelGrid& 
 double translation_cost(const VoxelGrid& moving, const VoxelGrid& target,
                         const Eigen::Vector3i& shift);
 
+/// The same J_t with the target's energy sum_x target(x)^2 given, for a caller that
+/// scores many moving grids against one target: the sum then runs over the moving
+/// grid's occupied box only.
+double translation_cost(const VoxelGrid& moving, const VoxelGrid& target,
+                        const Eigen::Vector3i& shift, double target_energy);
+
+/// sum_x grid(x)^2.
+double grid_energy(const VoxelGrid& grid);
+
 }  // namespace spectral_vs
