@@ -13,14 +13,14 @@ BUILD_DIR = $(firstword $(wildcard build/$(PYTAG)-*))
 APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev \
 	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev
 PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
-PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" ruff
+PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" "matplotlib>=3.7" ruff mypy
 
 .PHONY: all demo test test-cpp test-python install system-deps venv bench format lint clean
 
 all: install
 
 demo: install
-	$(VENV)/bin/spectral-vs demo --data $(DATA)
+	$(VENV)/bin/spectral-vs demo --data $(DATA) --output results/demo
 
 test: install test-cpp test-python
 
@@ -60,11 +60,12 @@ bench: install
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks
-	find cpp bindings tests/cpp -name '*.[ch]pp' | xargs clang-format -i
+	find cpp bindings tests/cpp examples -name '*.[ch]pp' | xargs clang-format -i
 
 lint:
 	$(VENV)/bin/ruff check python tests benchmarks
 	$(VENV)/bin/ruff format --check python tests benchmarks
+	$(PY) -m mypy
 
 clean:
 	rm -rf build

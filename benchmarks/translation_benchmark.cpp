@@ -2,13 +2,17 @@
 // normalised cross-power spectrum, inverse FFT, peak search, sub-voxel fit) against
 // the bare forward + inverse real FFT of the same grid with the same FFTW planning,
 // single-threaded. Prints one JSON object per voxel size.
+//
+// Times are the CPU time of the calling thread, and the three measurements are
+// interleaved run by run, so that other jobs on the machine neither inflate one of them
+// (a descheduled thread's clock stops) nor skew the ratio between them.
 #include <spectral_vs/translation/phase_correlation.hpp>
 
 #include <fftw3.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
+#include <ctime>
 #include <cstdlib>
 #include <random>
 #include <vector>
@@ -17,7 +21,12 @@ namespace {
 
 using spectral_vs::PointCloud;
 using spectral_vs::Points;
-using Clock = std::chrono::steady_clock;
+
+double thread_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return 1e3 * double(t.tv_sec) + 1e-6 * double(t.tv_nsec);
+}
 
 // A 0.25 m object (box with a sphere) on a 0.6 m x 0.6 m table with two other boxes.
 PointCloud scene_cloud(std::mt19937& rng, PointCloud& object) {
@@ -59,28 +68,38 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-double bare_fft_ms(const Eigen::Vector3i& d, int runs) {
-  const std::size_t n = std::size_t(d.x()) * d.y() * d.z();
-  const std::size_t nc = std::size_t(d.x()) * d.y() * (d.z() / 2 + 1);
-  float* real = fftwf_alloc_real(n);
-  fftwf_complex* spectrum = fftwf_alloc_complex(nc);
-  fftwf_plan forward = fftwf_plan_dft_r2c_3d(d.x(), d.y(), d.z(), real, spectrum, FFTW_ESTIMATE);
-  fftwf_plan inverse = fftwf_plan_dft_c2r_3d(d.x(), d.y(), d.z(), spectrum, real, FFTW_ESTIMATE);
-  std::fill(real, real + n, 0.0f);
-  std::vector<double> times;
-  for (int r = 0; r < runs; ++r) {
-    const auto start = Clock::now();
-    fftwf_execute(forward);
-    fftwf_execute(inverse);
-    times.push_back(std::chrono::duration<double, std::milli>(Clock::now() - start).count());
-    std::fill(real, real + n, 0.0f);
+// The bare forward + inverse real FFT of a grid, with the library's planning flags.
+class BareFft {
+public:
+  explicit BareFft(const Eigen::Vector3i& d)
+      : n_(std::size_t(d.x()) * d.y() * d.z()),
+        real_(fftwf_alloc_real(n_)),
+        spectrum_(fftwf_alloc_complex(std::size_t(d.x()) * d.y() * (d.z() / 2 + 1))) {
+    forward_ = fftwf_plan_dft_r2c_3d(d.x(), d.y(), d.z(), real_, spectrum_, FFTW_ESTIMATE);
+    inverse_ = fftwf_plan_dft_c2r_3d(d.x(), d.y(), d.z(), spectrum_, real_, FFTW_ESTIMATE);
+    std::fill(real_, real_ + n_, 0.0f);
   }
-  fftwf_destroy_plan(forward);
-  fftwf_destroy_plan(inverse);
-  fftwf_free(real);
-  fftwf_free(spectrum);
-  return median(times);
-}
+  ~BareFft() {
+    fftwf_destroy_plan(forward_);
+    fftwf_destroy_plan(inverse_);
+    fftwf_free(real_);
+    fftwf_free(spectrum_);
+  }
+  double time_ms() {
+    const double start = thread_ms();
+    fftwf_execute(forward_);
+    fftwf_execute(inverse_);
+    const double elapsed = thread_ms() - start;
+    std::fill(real_, real_ + n_, 0.0f);  // the inverse is unnormalised: keep values bounded
+    return elapsed;
+  }
+
+private:
+  std::size_t n_;
+  float* real_;
+  fftwf_complex* spectrum_;
+  fftwf_plan forward_, inverse_;
+};
 
 }  // namespace
 
@@ -98,26 +117,27 @@ int main(int argc, char** argv) {
     spectral_vs::PhaseCorrelation correlation(spec);
     correlation.set_target(spectral_vs::voxelize(scene, spec, spectral_vs::Occupancy::binary));
     spectral_vs::VoxelGrid moving;
-    std::vector<double> step_binary, step_trilinear;
+    BareFft bare(spec.dims);
+    std::vector<double> step_binary, step_trilinear, fft;
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 2 * runs; ++k) {
-      const bool trilinear = k % 2;
-      const auto start = Clock::now();
-      spectral_vs::voxelize_into(object.points(), spec,
-                                 trilinear ? spectral_vs::Occupancy::trilinear : spectral_vs::Occupancy::binary,
-                                 moving);
-      shift = correlation.estimate(moving).shift;
-      (trilinear ? step_trilinear : step_binary)
-          .push_back(std::chrono::duration<double, std::milli>(Clock::now() - start).count());
+    for (int k = 0; k < runs; ++k) {
+      for (const bool trilinear : {false, true}) {
+        const double start = thread_ms();
+        spectral_vs::voxelize_into(object.points(), spec,
+                                   trilinear ? spectral_vs::Occupancy::trilinear : spectral_vs::Occupancy::binary,
+                                   moving);
+        shift = correlation.estimate(moving).shift;
+        (trilinear ? step_trilinear : step_binary).push_back(thread_ms() - start);
+      }
+      fft.push_back(bare.time_ms());
     }
-    const double fft = bare_fft_ms(spec.dims, runs);
     std::printf("  {\"voxel_size_m\": %.4f, \"dims\": [%d, %d, %d], \"points\": %zu, \"runs\": %d,\n"
                 "   \"bare_fft_ms\": %.4f, \"step_binary_ms\": %.4f, \"step_trilinear_ms\": %.4f,\n"
                 "   \"ratio_binary\": %.3f, \"ratio_trilinear\": %.3f,\n"
                 "   \"shift_mm\": [%.2f, %.2f, %.2f]}%s\n",
-                r, spec.dims.x(), spec.dims.y(), spec.dims.z(), object.size(), runs, fft,
-                median(step_binary), median(step_trilinear), median(step_binary) / fft,
-                median(step_trilinear) / fft, 1000 * shift.x(), 1000 * shift.y(), 1000 * shift.z(),
+                r, spec.dims.x(), spec.dims.y(), spec.dims.z(), object.size(), runs, median(fft),
+                median(step_binary), median(step_trilinear), median(step_binary) / median(fft),
+                median(step_trilinear) / median(fft), 1000 * shift.x(), 1000 * shift.y(), 1000 * shift.z(),
                 s == 0 ? "," : "");
   }
   std::printf("]\n");

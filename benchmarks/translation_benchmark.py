@@ -34,7 +34,8 @@ def machine() -> str:
 
 def table(rows: list[dict]) -> str:
     lines = [
-        "| voxel | grid (voxels) | bare FFT pair | step, binary grid | ratio | step, trilinear grid | ratio |",
+        "| voxel | grid (voxels) | bare FFT pair | step, binary grid | ratio "
+        "| step, trilinear grid | ratio |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -53,7 +54,9 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=100, help="timed runs per case (median)")
     args = parser.parse_args()
     program = args.build_dir / "benchmarks" / "translation_benchmark"
-    output = subprocess.run([str(program), str(args.runs)], check=True, capture_output=True, text=True)
+    output = subprocess.run(
+        [str(program), str(args.runs)], check=True, capture_output=True, text=True
+    )
     rows = json.loads(output.stdout)
     results = {"machine": machine(), "runs": args.runs, "cases": rows}
     out_dir = ROOT / "benchmarks" / "results"

@@ -41,7 +41,16 @@ initial_guess : ndarray (4, 4)
 global_search : bool
     Start from the best rotations of the SO(3) search (default True).
 hypotheses : int
-    Rotations of the global search that are refined and verified.
+    Rotations of the global search that are refined and verified (default 16).
+refinements : int
+    The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
+    scene around it; the best final fitness is kept (default 3, at most hypotheses).
+search_voxel_size : float
+    Voxel of the global search's translation grid, metres; 0 (default): twice
+    voxel_size, coarser where needed to keep that grid under 2^19 voxels.
+window_margin : float
+    How far the model may move per window placement, metres; 0 (default): the larger of
+    5 voxels and 2.5 search voxels.
 subvoxel : bool
     Sub-voxel refinement of the phase-correlation peak.
 occupancy : str
@@ -53,6 +62,8 @@ max_voxels : int
     Refuse translation grids with more voxels than this.
 )doc")
       .def(py::init<>())
+      .def("__copy__", [](const AlignParams& p) { return AlignParams(p); })
+      .def("__deepcopy__", [](const AlignParams& p, const py::dict&) { return AlignParams(p); }, py::arg("memo"))
       .def_readwrite("voxel_size", &AlignParams::voxel_size)
       .def_readwrite("bandwidth", &AlignParams::bandwidth)
       .def_readwrite("translation_gain", &AlignParams::translation_gain)
@@ -69,6 +80,9 @@ max_voxels : int
                     [](AlignParams& p, const py::handle& T) { p.initial_guess = to_transform(T, "initial_guess"); })
       .def_readwrite("global_search", &AlignParams::global_search)
       .def_readwrite("hypotheses", &AlignParams::hypotheses)
+      .def_readwrite("refinements", &AlignParams::refinements)
+      .def_readwrite("search_voxel_size", &AlignParams::search_voxel_size)
+      .def_readwrite("window_margin", &AlignParams::window_margin)
       .def_readwrite("subvoxel", &AlignParams::subvoxel)
       .def_property("occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
                     [](AlignParams& p, const std::string& s) {
@@ -108,6 +122,10 @@ max_voxels : int
       .def_readonly("correlation", &AlignResult::correlation)
       .def_readonly("translation_peak", &AlignResult::translation_peak)
       .def_readonly("hypothesis", &AlignResult::hypothesis)
+      .def_readonly("search_voxel_size", &AlignResult::search_voxel_size,
+                    "Voxel of the global search's translation grid, metres (0 without it).")
+      .def_property_readonly("window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
+                             "Voxels of the window Algorithm 1 ran in, per axis.")
       .def_readonly("history", &AlignResult::history)
       .def("__repr__", [](const AlignResult& r) {
         std::ostringstream out;

@@ -3,6 +3,9 @@
 
 #include <spectral_vs/translation/phase_correlation.hpp>
 
+#include <pybind11/stl.h>
+
+#include <optional>
 #include <sstream>
 
 namespace spectral_vs::python {
@@ -88,8 +91,13 @@ threads : int
            py::arg("threads") = 1)
       .def("set_target", &PhaseCorrelation::set_target, py::arg("target"),
            py::call_guard<py::gil_scoped_release>())
-      .def("estimate", &PhaseCorrelation::estimate, py::arg("moving"),
-           py::call_guard<py::gil_scoped_release>())
+      .def(
+          "estimate",
+          [](PhaseCorrelation& self, const VoxelGrid& moving, std::optional<Eigen::Vector3i> max_shift) {
+            return max_shift ? self.estimate(moving, *max_shift) : self.estimate(moving);
+          },
+          py::arg("moving"), py::arg("max_shift") = py::none(), py::call_guard<py::gil_scoped_release>(),
+          "Shift of `moving` onto the target; `max_shift` (voxels per axis) bounds the search.")
       .def_property_readonly("has_target", &PhaseCorrelation::has_target)
       .def_property_readonly("spec", &PhaseCorrelation::spec);
 

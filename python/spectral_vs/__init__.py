@@ -1,8 +1,11 @@
 """Correspondence-free point cloud registration and 3D visual servoing in the spectral domain.
 
-The representation (voxel grids, Extended Gaussian Images) and the translation
-estimation (3D phase correlation) of "3D Spectral Domain Registration-Based Visual
-Servoing" run in a compiled C++ core; this package re-exports them.
+The representation (voxel grids, Extended Gaussian Images), the translation (3D phase
+correlation) and rotation (EGI correlation over SO(3)) estimation, the aligner of
+Algorithm 1 and the camera kinematics of "3D Spectral Domain Registration-Based Visual
+Servoing" run in a compiled C++ core, ``spectral_vs._core``; this package re-exports
+them and adds :func:`align` and :func:`load_cloud`. The package is typed (PEP 561):
+``_core.pyi`` describes the compiled module to type checkers.
 """
 
 from __future__ import annotations
@@ -52,7 +55,6 @@ from spectral_vs._core import (
     wigner_generators,
     wigner_real,
 )
-
 from spectral_vs.registration import align
 from spectral_vs.robot import RobotInterface
 
@@ -64,6 +66,17 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
     Organized clouds are flattened and points with a non-finite coordinate are
     dropped; :func:`load_cloud_with_info` also reports how many.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its extension chooses the format.
+
+    Returns
+    -------
+    PointCloud
+        The finite points in metres, with the file's normals if it has
+        ``normal_x``/``normal_y``/``normal_z`` fields.
 
     Raises
     ------

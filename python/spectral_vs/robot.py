@@ -31,16 +31,30 @@ class RobotInterface(Protocol):
         ...
 
     def send_joint_velocities(self, q_dot: np.ndarray, dt: float) -> None:
-        """Command joint velocities ``q_dot`` (rad/s) for the next ``dt`` seconds.
+        """Command joint velocities ``q_dot`` for the next ``dt`` seconds.
 
         A simulation advances its clock by ``dt``; a real robot forwards the command to
         its controller and returns (the loop paces itself). Implementations may clamp the
         command to their hardware limits but must never exceed them.
+
+        Parameters
+        ----------
+        q_dot : ndarray, shape (n,)
+            Joint velocities, rad/s (m/s for prismatic joints), in the kinematics' order.
+        dt : float
+            Duration of the command, s (the period of the servo loop).
         """
         ...
 
     def capture(self) -> PointCloud:
-        """A point cloud with normals oriented toward the camera, in the camera frame."""
+        """A point cloud with normals oriented toward the camera, in the camera frame.
+
+        Returns
+        -------
+        PointCloud
+            Points in metres with unit normals (``has_normals`` is True), ready for
+            :func:`spectral_vs.align` as the scene.
+        """
         ...
 
     def stop(self) -> None:

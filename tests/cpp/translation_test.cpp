@@ -161,6 +161,29 @@ TEST(PhaseCorrelation, CachedTargetGivesTheSameAnswerAsOneShot) {
   EXPECT_EQ(first.shift_voxels, one_shot.shift_voxels);
 }
 
+// The correlation clears only the box the previous moving grid occupied: a large grid
+// followed by a small one elsewhere must not leave any of the first behind.
+TEST(PhaseCorrelation, EstimatesInSequenceMatchFreshObjects) {
+  std::mt19937 rng(16);
+  const PointCloud shape = test::box_and_sphere(4000, rng);
+  const PointCloud target = shape.transformed(test::translation({0.05, -0.03, 0.02}));
+  const Points small = shape.points().topRows(500);  // the sphere's part only
+  const PointCloud far = shape.transformed(test::translation({-0.04, 0.06, -0.01}));
+  const GridSpec spec = make_grid_spec(bounding_box(far), bounding_box(target), 0.008);
+  PhaseCorrelation reused(spec);
+  reused.set_target(voxelize(target, spec, Occupancy::trilinear));
+  VoxelGrid moving;
+  for (const Points* points : {&shape.points(), &small, &far.points(), &shape.points()}) {
+    voxelize_into(*points, spec, Occupancy::trilinear, moving);
+    const VoxelGrid fresh = voxelize(PointCloud(*points), spec, Occupancy::trilinear);
+    ASSERT_EQ(moving.values, fresh.values);  // the reused grid was cleared exactly
+    const auto estimate = reused.estimate(moving);
+    const auto expected = phase_correlation(fresh, voxelize(target, spec, Occupancy::trilinear));
+    EXPECT_EQ(estimate.shift_voxels, expected.shift_voxels);
+    EXPECT_EQ(estimate.peak, expected.peak);
+  }
+}
+
 TEST(TranslationCost, EqualsHalfTheSymmetricDifferenceOfBinaryGrids) {
   GridSpec spec;
   spec.resolution = 0.01;

@@ -80,7 +80,9 @@ def test_global_search_recovers_large_rotations(angle):
 def test_fitness_tells_success_from_failure():
     rng = np.random.default_rng(7)
     model, scene, R, t = make_case(rng, 120)
-    stuck = svs.align(model, scene, global_search=False, downsample=False)  # beyond the paper's basin
+    stuck = svs.align(
+        model, scene, global_search=False, downsample=False
+    )  # beyond the paper's basin
     found = svs.align(model, scene, downsample=False)
     assert errors(stuck, R, t)[0] > 5.0
     assert errors(found, R, t)[0] < 1.0
@@ -105,7 +107,7 @@ def test_max_iterations_reports_not_converged():
 
 def test_arrays_without_normals_are_accepted(rng):
     points, _ = box_with_ball(rng, 4000)
-    result = svs.align(points, points + [0.01, 0.0, 0.0], viewpoint=(0.0, 0.0, 1.0))
+    result = svs.align(points, points + np.array([0.01, 0.0, 0.0]), viewpoint=(0.0, 0.0, 1.0))
     assert np.linalg.norm(np.asarray(result.T_scene_model)[:3, 3] - [0.01, 0, 0]) < 0.002
 
 

@@ -56,7 +56,8 @@ def test_transformed_checks_rigidity(rng):
         cloud.transformed(scaling)
     T = np.eye(4)
     T[:3, 3] = [0.1, 0.2, 0.3]
-    np.testing.assert_allclose(cloud.transformed(T).points, cloud.points + [0.1, 0.2, 0.3])
+    expected = cloud.points + np.array([0.1, 0.2, 0.3])
+    np.testing.assert_allclose(cloud.transformed(T).points, expected)
 
 
 def test_load_milk_carton(data_dir):
@@ -190,7 +191,9 @@ def test_egi_histogram(rng):
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     histogram = svs.egi(normals, bandwidth)
     angle = np.pi / bandwidth
-    Rz = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    Rz = np.array(
+        [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+    )
     rotated = svs.egi(normals @ Rz.T, bandwidth)
     np.testing.assert_array_equal(rotated, np.roll(histogram, 1, axis=1))
     weighted = svs.egi(normals, bandwidth, weights=np.full(4000, 0.5))

@@ -63,7 +63,10 @@ def test_same_input_gives_the_same_result(rng):
     a = svs.PointCloud(points)
     b = a.transformed(_translation([0.021, -0.013, 0.008]))
     spec = svs.make_grid_spec(a, b, 0.008)
-    runs = {tuple(svs.phase_correlation(svs.voxelize(a, spec), svs.voxelize(b, spec))[0]) for _ in range(3)}
+    runs = {
+        tuple(svs.phase_correlation(svs.voxelize(a, spec), svs.voxelize(b, spec))[0])
+        for _ in range(3)
+    }
     assert len(runs) == 1
 
 

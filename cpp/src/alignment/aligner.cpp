@@ -3,19 +3,27 @@
 #include <spectral_vs/rotation/so3.hpp>
 #include <spectral_vs/rotation/so3_correlation.hpp>
 #include <spectral_vs/rotation/so3_search.hpp>
-#include <spectral_vs/translation/phase_correlation.hpp>
 
+#include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 namespace spectral_vs {
 
 using detail::fail;
+using detail::SceneMap;
+using detail::SceneTranslation;
+using detail::TranslationWindow;
 
 namespace {
+
+// Largest global-search grid before its voxel is coarsened: 2^19 voxels, about 4 ms per
+// FFT pair here, so that 16 hypotheses fit the time budget on a room-sized scan.
+constexpr double kSearchGridVoxels = 524288.0;
 
 void check_params(const AlignParams& p) {
   detail::require_positive_finite(p.voxel_size, "voxel_size");
@@ -33,6 +41,15 @@ void check_params(const AlignParams& p) {
   detail::require_positive_finite(p.tolerance, "tolerance");
   if (p.max_iterations < 1) fail("max_iterations must be >= 1, got ", p.max_iterations);
   if (p.hypotheses < 1) fail("hypotheses must be >= 1, got ", p.hypotheses);
+  if (p.refinements < 1 || p.refinements > p.hypotheses) {
+    fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
+  }
+  if (!(p.search_voxel_size >= 0.0 && std::isfinite(p.search_voxel_size))) {
+    fail("search_voxel_size must be >= 0 metres (0: automatic), got ", p.search_voxel_size);
+  }
+  if (!(p.window_margin >= 0.0 && std::isfinite(p.window_margin))) {
+    fail("window_margin must be >= 0 metres (0: automatic), got ", p.window_margin);
+  }
   if (p.threads < 1) fail("threads must be >= 1, got ", p.threads);
   require_rigid_transform(p.initial_guess, "initial_guess");
 }
@@ -44,31 +61,17 @@ struct Pose {
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();
 };
 
-// The cube around a centroid that holds a cloud whatever its rotation.
-Eigen::AlignedBox3d rotation_hull(const Eigen::Vector3d& centre, double radius) {
-  return {centre - Eigen::Vector3d::Constant(radius), centre + Eigen::Vector3d::Constant(radius)};
-}
-
-// Everything Algorithm 1 needs that does not change across iterations: the scene's
-// spectrum and EGI coefficients, the model's centred points and EGI coefficients.
-class Alignment {
+// The model as Algorithm 1 moves it, rotating about its centroid.
+class MovingModel {
 public:
-  /// `start` is where the model's centroid begins, scene coordinates.
-  Alignment(const PointCloud& model, const PointCloud& scene, const AlignParams& params,
-            const Eigen::Vector3d& start)
-      : params_(params),
-        centroid_(model.centroid()),
-        centred_(model.points().rowwise() - centroid_.transpose()),
-        model_coefficients_(egi_coefficients(model, params.bandwidth, params.egi_method)),
-        scene_coefficients_(egi_coefficients(scene, params.bandwidth, params.egi_method)),
-        correlation_(scene_coefficients_, model_coefficients_, params.bandwidth, true),
-        spec_(grid_for(scene, start, reach(model), params)),
-        phase_(spec_, phase_params(params)) {
-    scene_grid_ = voxelize(scene, spec_, params.occupancy, params.limits);
-    phase_.set_target(scene_grid_);
-    scene_energy_ = grid_energy(scene_grid_);
-    mark_scene_neighbourhood(scene);
+  explicit MovingModel(const PointCloud& model)
+      : centroid_(model.centroid()), centred_(model.points().rowwise() - centroid_.transpose()) {
+    reach_ = centred_.rowwise().norm().maxCoeff();
   }
+
+  double reach() const { return reach_; }
+  const Eigen::Vector3d& centroid() const { return centroid_; }
+  Eigen::Vector3d centre(const Pose& pose) const { return centroid_ + pose.offset; }
 
   Pose pose_of(const Transform& T_scene_model) const {
     Pose pose;
@@ -84,198 +87,199 @@ public:
     return T;
   }
 
-  So3Correlation& correlation() { return correlation_; }
-  const ShCoefficients& model_coefficients() const { return model_coefficients_; }
-  const ShCoefficients& scene_coefficients() const { return scene_coefficients_; }
-
-  // The translation step: the phase-correlation shift of the model at `pose` onto the scene.
-  TranslationEstimate estimate_shift(const Pose& pose) {
-    move_model(pose);
-    voxelize_into(moved_, spec_, params_.occupancy, moving_, params_.limits);
-    if (moving_.empty()) fail("initial_guess: the model falls outside the scene's grid");
-    return phase_.estimate(moving_);
-  }
-
-  // Runs Algorithm 1 from `pose` until the stop rule of eq. (17) or max_iterations.
-  AlignResult run(Pose pose) {
-    AlignResult result;
-    const bool newton = params_.rotation_step == RotationStep::newton;
-    for (int iteration = 0; iteration < params_.max_iterations; ++iteration) {
-      const CorrelationValue c = correlation_.evaluate(pose.R, newton);
-      pose.R = pose.R * exp_so3(rotation_step(c));
-
-      const TranslationEstimate shift = estimate_shift(pose);
-      const Eigen::Vector3d step = params_.translation_gain * shift.shift;
-      pose.offset += step;
-
-      AlignIteration record;
-      record.translation_step = step.norm() / params_.voxel_size;
-      record.rotation_gradient = c.gradient.norm();
-      record.correlation = c.value;
-      record.translation_peak = shift.peak;
-      record.translation_cost =
-          translation_cost(moving_, scene_grid_, Eigen::Vector3i::Zero(), scene_energy_);
-      record.rotation_cost = rotation_cost(scene_coefficients_, model_coefficients_, pose.R,
-                                           params_.bandwidth, true);
-      record.T_scene_model = transform_of(pose);
-      result.history.push_back(record);
-      result.iterations = iteration + 1;
-      if (record.translation_step + record.rotation_gradient < params_.tolerance) {
-        result.converged = true;
-        break;
-      }
-    }
-    finish(pose, result);
-    return result;
-  }
-
-  // Fraction of the model's occupied voxels at `pose` that land next to scene points.
-  double fitness(const Pose& pose) {
-    move_model(pose);
-    std::size_t occupied = 0, supported = 0;
-    marks_.assign(spec_.voxel_count(), 0);
-    for (Eigen::Index i = 0; i < moved_.rows(); ++i) {
-      const Eigen::Vector3i v = spec_.index_of(moved_.row(i).transpose());
-      if (!spec_.contains(v)) {
-        continue;
-      }
-      const std::size_t index = linear(v);
-      if (marks_[index]) continue;
-      marks_[index] = 1;
-      ++occupied;
-      supported += scene_near_[index];
-    }
-    return occupied ? double(supported) / double(occupied) : 0.0;
-  }
-
-  void finish(const Pose& pose, AlignResult& result) {
-    result.T_scene_model = transform_of(pose);
-    result.fitness = fitness(pose);
-    result.correlation = correlation_.evaluate(pose.R).value;
-    result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
+  // The model's points at `pose`, in the scene.
+  const Points& move(const Pose& pose) {
+    moved_.noalias() = centred_ * pose.R.transpose();
+    moved_.rowwise() += centre(pose).transpose();
+    return moved_;
   }
 
 private:
-  static double reach(const PointCloud& model) {
-    return (model.points().rowwise() - model.centroid().transpose()).rowwise().norm().maxCoeff();
-  }
-
-  // The grid holds the scene grown by the model's reach (the model's centroid may end
-  // anywhere in the scene) and the model's rotation hull where it starts. Along each axis
-  // it also has room for the model's hull plus the scene, so that no shift between them
-  // wraps around.
-  static GridSpec grid_for(const PointCloud& scene, const Eigen::Vector3d& start, double reach,
-                           const AlignParams& params) {
-    const Eigen::AlignedBox3d scene_box = bounding_box(scene);
-    const Eigen::AlignedBox3d hull = rotation_hull(start, reach);
-    GridSpec spec = make_grid_spec(hull, scene_box, params.voxel_size, params.limits);
-    Eigen::AlignedBox3d cover = scene_box;
-    cover.min().array() -= reach;
-    cover.max().array() += reach;
-    cover.extend(hull);
-    const double r = params.voxel_size;
-    const Eigen::Vector3d origin = ((cover.min() / r).array().floor() - 1.0).matrix() * r;
-    for (int axis = 0; axis < 3; ++axis) {
-      const int needed = static_cast<int>(std::ceil((cover.max()[axis] - origin[axis]) / r)) + 2;
-      spec.dims[axis] = fft_friendly_size(std::max(spec.dims[axis], needed));
-    }
-    spec.origin = origin;
-    if (spec.voxel_count() > params.limits.max_voxels) {
-      fail("voxel_size: a translation grid of ", spec.dims.transpose(), " voxels at ", r,
-           " m exceeds the limit of ", params.limits.max_voxels, " voxels (max_voxels)");
-    }
-    return spec;
-  }
-
-  static PhaseCorrelationParams phase_params(const AlignParams& params) {
-    PhaseCorrelationParams p;
-    p.subvoxel = params.subvoxel;
-    p.threads = params.threads;
-    return p;
-  }
-
-  std::size_t linear(const Eigen::Vector3i& v) const {
-    return (std::size_t(v.x()) * spec_.dims.y() + v.y()) * spec_.dims.z() + v.z();
-  }
-
-  void mark_scene_neighbourhood(const PointCloud& scene) {
-    scene_near_.assign(spec_.voxel_count(), 0);
-    for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
-      const Eigen::Vector3i v = spec_.index_of(scene.points().row(i).transpose());
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            const Eigen::Vector3i n = v + Eigen::Vector3i(dx, dy, dz);
-            if (spec_.contains(n)) scene_near_[linear(n)] = 1;
-          }
-    }
-  }
-
-  void move_model(const Pose& pose) {
-    const Eigen::RowVector3d t = (centroid_ + pose.offset).transpose();
-    moved_.noalias() = centred_ * pose.R.transpose();
-    moved_.rowwise() += t;
-  }
-
-  Eigen::Vector3d rotation_step(const CorrelationValue& c) const {
-    Eigen::Vector3d omega = params_.rotation_gain * c.gradient;
-    if (params_.rotation_step == RotationStep::newton) {
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(c.hessian);
-      if (eigen.eigenvalues().maxCoeff() < 0.0) {
-        omega = -params_.rotation_gain * c.hessian.ldlt().solve(c.gradient);
-      }
-    }
-    const double angle = omega.norm();
-    if (angle > params_.max_rotation_step) omega *= params_.max_rotation_step / angle;
-    return omega;
-  }
-
-  AlignParams params_;
   Eigen::Vector3d centroid_;
   Points centred_;
-  ShCoefficients model_coefficients_;
-  ShCoefficients scene_coefficients_;
-  So3Correlation correlation_;
-  GridSpec spec_;
-  PhaseCorrelation phase_;
-  VoxelGrid scene_grid_;
-  double scene_energy_ = 0.0;  // sum of squares of scene_grid_, for J_t
-  std::vector<std::uint8_t> scene_near_;
-  std::vector<std::uint8_t> marks_;
   Points moved_;
-  VoxelGrid moving_;
+  double reach_ = 0.0;
+};
+
+Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params) {
+  Eigen::Vector3d omega = params.rotation_gain * c.gradient;
+  if (params.rotation_step == RotationStep::newton) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(c.hessian);
+    if (eigen.eigenvalues().maxCoeff() < 0.0) {
+      omega = -params.rotation_gain * c.hessian.ldlt().solve(c.gradient);
+    }
+  }
+  const double angle = omega.norm();
+  if (angle > params.max_rotation_step) omega *= params.max_rotation_step / angle;
+  return omega;
+}
+
+double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params) {
+  if (params.search_voxel_size > 0.0) return params.search_voxel_size;
+  const Eigen::Vector3d extent = bounding_box(scene).sizes().array() + 4.0 * reach;
+  const double fitting = std::cbrt(extent.prod() / kSearchGridVoxels);
+  return std::max(2.0 * params.voxel_size, fitting);
+}
+
+double window_margin(double search_voxel, const AlignParams& params) {
+  if (params.window_margin > 0.0) return params.window_margin;
+  return std::max(5.0 * params.voxel_size, 2.5 * search_voxel);
+}
+
+// What Algorithm 1 works with: the scene, the model, the EGI correlation it ascends,
+// and the translation grids. The paper's mode starts on the grid over the whole scene
+// and moves to a window once the translation steps fit in it.
+struct Problem {
+  const SceneMap& scene;
+  MovingModel& model;
+  const ShCoefficients& model_coefficients;
+  const AlignParams& params;
+  double margin;
+};
+
+PhaseCorrelationParams phase_params(const AlignParams& params) {
+  PhaseCorrelationParams p;
+  p.subvoxel = params.subvoxel;
+  p.threads = params.threads;
+  return p;
+}
+
+// Made once (its FFT plans are re-used), then moved to each place Algorithm 1 runs.
+void place_window(const Problem& problem, std::optional<TranslationWindow>& window,
+                  const Eigen::Vector3d& centre) {
+  if (window) {
+    window->place(centre);
+    return;
+  }
+  window.emplace(problem.scene, problem.model.reach(), problem.margin, centre, problem.params.voxel_size,
+                 problem.params.occupancy, phase_params(problem.params), problem.params.limits);
+}
+
+// Algorithm 1 (eq. 16-17) from `pose` until the stop rule or max_iterations. The
+// translation comes from `window`, placed here around the model, or, while given and
+// until the steps fit in a window, from `whole_scene` (the paper's mode).
+AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
+                           const ShCoefficients& scene_coefficients, Pose pose,
+                           std::optional<TranslationWindow>& window, SceneTranslation* whole_scene) {
+  const AlignParams& params = problem.params;
+  const bool newton = params.rotation_step == RotationStep::newton;
+  if (!whole_scene) place_window(problem, window, problem.model.centre(pose));
+  AlignResult result;
+  for (int iteration = 0; iteration < params.max_iterations; ++iteration) {
+    const CorrelationValue c = correlation.evaluate(pose.R, newton);
+    pose.R = pose.R * exp_so3(rotation_step(c, params));
+
+    const Points& moved = problem.model.move(pose);
+    const TranslationEstimate shift = whole_scene ? whole_scene->estimate(moved) : window->estimate(moved);
+    const Eigen::Vector3d step = params.translation_gain * shift.shift;
+    pose.offset += step;
+
+    AlignIteration record;
+    record.translation_step = step.norm() / params.voxel_size;
+    record.rotation_gradient = c.gradient.norm();
+    record.correlation = c.value;
+    record.translation_peak = shift.peak;
+    record.translation_cost = whole_scene ? whole_scene->translation_cost() : window->translation_cost();
+    record.rotation_cost =
+        rotation_cost(scene_coefficients, problem.model_coefficients, pose.R, params.bandwidth, true);
+    record.T_scene_model = problem.model.transform_of(pose);
+    result.history.push_back(record);
+    result.iterations = iteration + 1;
+    if (record.translation_step + record.rotation_gradient < params.tolerance) {
+      result.converged = true;
+      break;
+    }
+    if (!whole_scene) {
+      window->follow(problem.model.centre(pose));
+    } else if (step.norm() < 0.5 * problem.margin) {
+      place_window(problem, window, problem.model.centre(pose));  // near: go local
+      whole_scene = nullptr;
+    }
+  }
+  result.T_scene_model = problem.model.transform_of(pose);
+  result.fitness = problem.scene.fitness(problem.model.move(pose));
+  result.correlation = correlation.evaluate(pose.R).value;
+  result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
+  if (!whole_scene) result.window_dims = window->dims();
+  return result;
+}
+
+// The EGI of the scene points in a window: in clutter, the object's own normals
+// rather than the whole scene's.
+std::optional<ShCoefficients> window_coefficients(const SceneMap& scene, const Eigen::Vector3d& centre,
+                                                  double half_width, const AlignParams& params) {
+  const Eigen::AlignedBox3d box(centre - Eigen::Vector3d::Constant(half_width),
+                                centre + Eigen::Vector3d::Constant(half_width));
+  const std::vector<Eigen::Index> rows = scene.points_in(box);
+  if (rows.size() < 3) return std::nullopt;
+  Points normals(static_cast<Eigen::Index>(rows.size()), 3);
+  for (std::size_t i = 0; i < rows.size(); ++i) normals.row(Eigen::Index(i)) = scene.cloud().normals().row(rows[i]);
+  return egi_coefficients(normals, params.bandwidth, params.egi_method);
+}
+
+struct Hypothesis {
+  int index = 0;
+  Pose pose;
+  double fitness = 0.0;
 };
 
 // Beyond the paper: the best rotations of the SO(3) search, each refined on the EGI
-// correlation and placed by one global phase correlation, verified by their fitness;
-// Algorithm 1 then polishes the best of them.
-AlignResult align_from_global_search(Alignment& alignment, const Eigen::Vector3d& start_offset,
-                                     const AlignParams& params) {
+// correlation and placed by a phase correlation over the whole scene (coarse voxels),
+// ranked by fitness.
+std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation& correlation,
+                                          const ShCoefficients& scene_coefficients, double search_voxel) {
+  const AlignParams& params = problem.params;
   So3SearchParams search;
   search.candidates = params.hypotheses;
   search.threads = params.threads;
-  const auto candidates = so3_search(alignment.scene_coefficients(), alignment.model_coefficients(),
-                                     params.bandwidth, search);
+  const auto candidates =
+      so3_search(scene_coefficients, problem.model_coefficients, params.bandwidth, search);
+  const Eigen::Vector3d start = problem.scene.cloud().centroid();
+  SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel, params.occupancy,
+                          phase_params(params), params.limits);
   RotationRefineParams refine;
   refine.newton = params.rotation_step == RotationStep::newton;
-  int best = -1;
-  double best_fitness = -1.0;
-  Pose best_pose;
+  std::vector<Hypothesis> hypotheses;
   for (std::size_t h = 0; h < candidates.size(); ++h) {
-    Pose pose;
-    pose.R = refine_rotation(alignment.correlation(), candidates[h].R, refine).R;
-    pose.offset = start_offset;
-    pose.offset += alignment.estimate_shift(pose).shift;
-    const double fitness = alignment.fitness(pose);
-    if (fitness > best_fitness) {
-      best_fitness = fitness;
-      best = static_cast<int>(h);
-      best_pose = pose;
+    Hypothesis hypothesis;
+    hypothesis.index = static_cast<int>(h);
+    hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
+    hypothesis.pose.offset = start - problem.model.centroid();
+    hypothesis.pose.offset += coarse.estimate(problem.model.move(hypothesis.pose)).shift;
+    hypothesis.fitness = problem.scene.fitness(problem.model.move(hypothesis.pose));
+    hypotheses.push_back(hypothesis);
+  }
+  std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+  return hypotheses;
+}
+
+// Algorithm 1 from a hypothesis, in a window of the scene around it, on the EGI of the
+// scene inside that window.
+AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_correlation,
+                              const ShCoefficients& scene_coefficients, const Hypothesis& hypothesis,
+                              std::optional<TranslationWindow>& window) {
+  const double half_width = problem.model.reach() + problem.margin;
+  const auto local = window_coefficients(problem.scene, problem.model.centre(hypothesis.pose), half_width,
+                                         problem.params);
+  std::optional<So3Correlation> local_correlation;
+  if (local) {
+    try {
+      local_correlation.emplace(*local, problem.model_coefficients, problem.params.bandwidth, true);
+    } catch (const std::invalid_argument&) {
+      // A window whose normals have no structure (a uniform EGI): keep the scene's.
     }
   }
-  AlignResult result = alignment.run(best_pose);
-  result.hypothesis = best;
+  So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
+  const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
+  AlignResult result = run_algorithm1(problem, correlation, coefficients, hypothesis.pose, window, nullptr);
+  result.hypothesis = hypothesis.index;
   return result;
+}
+
+bool better(const AlignResult& a, const AlignResult& b) {
+  if (a.fitness != b.fitness) return a.fitness > b.fitness;
+  return a.correlation > b.correlation;
 }
 
 }  // namespace
@@ -286,17 +290,33 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   require_normals(model, "model");
   require_normals(scene, "scene");
   check_params(params);
-  const Eigen::Vector3d model_centroid = model.centroid();
-  if (params.global_search) {
-    // The phase correlation finds the translation globally: start at the scene's centre.
-    const Eigen::Vector3d start = scene.centroid();
-    Alignment alignment(model, scene, params, start);
-    return align_from_global_search(alignment, start - model_centroid, params);
+  MovingModel moving(model);
+  const SceneMap scene_map(scene, params.voxel_size, params.limits);
+  const ShCoefficients model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
+  const ShCoefficients scene_coefficients = egi_coefficients(scene, params.bandwidth, params.egi_method);
+  So3Correlation correlation(scene_coefficients, model_coefficients, params.bandwidth, true);
+
+  if (!params.global_search) {
+    const Problem problem{scene_map, moving, model_coefficients, params, window_margin(0.0, params)};
+    const Pose start = moving.pose_of(params.initial_guess);
+    SceneTranslation whole_scene(scene_map, moving.centre(start), moving.reach(), params.voxel_size,
+                                 params.occupancy, phase_params(params), params.limits);
+    std::optional<TranslationWindow> window;
+    return run_algorithm1(problem, correlation, scene_coefficients, start, window, &whole_scene);
   }
-  const Transform& T = params.initial_guess;
-  const Eigen::Vector3d start = T.topLeftCorner<3, 3>() * model_centroid + T.topRightCorner<3, 1>();
-  Alignment alignment(model, scene, params, start);
-  return alignment.run(alignment.pose_of(T));
+  const double search_voxel = search_voxel_size(scene, moving.reach(), params);
+  const Problem problem{scene_map, moving, model_coefficients, params, window_margin(search_voxel, params)};
+  const std::vector<Hypothesis> hypotheses =
+      global_hypotheses(problem, correlation, scene_coefficients, search_voxel);
+  AlignResult best;
+  std::optional<TranslationWindow> window;
+  const int runs = std::min<int>(params.refinements, static_cast<int>(hypotheses.size()));
+  for (int i = 0; i < runs; ++i) {
+    AlignResult result = refine_hypothesis(problem, correlation, scene_coefficients, hypotheses[i], window);
+    if (i == 0 || better(result, best)) best = std::move(result);
+  }
+  best.search_voxel_size = search_voxel;
+  return best;
 }
 
 }  // namespace spectral_vs

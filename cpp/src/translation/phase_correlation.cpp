@@ -9,6 +9,7 @@
 #include <climits>
 #include <cmath>
 #include <complex>
+#include <limits>
 #include <mutex>
 
 namespace spectral_vs {
@@ -71,17 +72,28 @@ double frequency(int k, int n) { return (k <= n / 2 ? k : k - n) / static_cast<d
 // atan2 to within 2e-4 rad (a minimax polynomial on [0, 1] and octant symmetry): the
 // phases it reads are far noisier than that, and std::atan2 was a third of the fit.
 float fast_atan2(float y, float x) {
+  // Written as arithmetic on 0/1 selects, with no conditional operation, so that a loop
+  // over it vectorises (GCC will not speculate a conditional float subtraction).
   const float ax = std::abs(x), ay = std::abs(y);
-  const float a = std::min(ax, ay) / std::max(std::max(ax, ay), 1e-30f);
+  const float swap = ay > ax ? 1.0f : 0.0f;
+  const float lo = ax < ay ? ax : ay;
+  const float hi = ax < ay ? ay : ax;
+  const float a = lo / (hi > 1e-30f ? hi : 1e-30f);
   const float s = a * a;
-  float r = ((-0.0464964749f * s + 0.15931422f) * s - 0.327622764f) * s * a + a;
-  if (ay > ax) r = 1.57079637f - r;
-  if (x < 0.0f) r = 3.14159274f - r;
-  return y < 0.0f ? -r : r;
+  const float r = ((-0.0464964749f * s + 0.15931422f) * s - 0.327622764f) * s * a + a;
+  const float octant = r + swap * (1.57079637f - 2.0f * r);
+  const float half = octant + (x < 0.0f ? 1.0f : 0.0f) * (3.14159274f - 2.0f * octant);
+  return (y < 0.0f ? -1.0f : 1.0f) * half;
 }
 
-// a wrapped to [-pi, pi]; std::remainder is exact but several times slower.
-double wrap_angle(double a) { return a - 2.0 * M_PI * std::nearbyint(a / (2.0 * M_PI)); }
+constexpr float kTwoPi = 6.28318531f;
+
+// a wrapped to [-pi, pi] by rounding through an integer conversion, which (unlike
+// std::nearbyint on baseline x86-64) is a single instruction; |a| is far below 2^31.
+float wrap_angle(float a) {
+  const float turns = a * (1.0f / kTwoPi);
+  return a - kTwoPi * static_cast<float>(static_cast<int>(turns + (turns >= 0.0f ? 0.5f : -0.5f)));
+}
 
 }  // namespace
 
@@ -91,15 +103,20 @@ struct PhaseCorrelation::Impl {
   std::size_t real_count = 0;
   std::size_t complex_count = 0;
   int half_z = 0;  // nz / 2 + 1
-  FftwBuffer<float> real;
-  FftwBuffer<Complex> moving_spectrum;
-  FftwBuffer<Complex> cross_power;
+  FftwBuffer<float> input;   // forward transform's input; zero outside input_box
+  FftwBuffer<float> output;  // inverse transform's output: the correlation
+  // The moving grid's spectrum, overwritten in place by the cross-power spectrum (one
+  // buffer less to stream through memory on each estimate).
+  FftwBuffer<Complex> spectrum;
   FftwBuffer<Complex> target_spectrum;
   fftwf_plan forward = nullptr;
   fftwf_plan inverse = nullptr;
   bool has_target = false;
   Eigen::Vector3i target_min, target_max;
-  double phase_bins = 0.0;  // bins of the full spectrum that carry phase in cross_power
+  // The box of `input` that may hold non-zero voxels: only it is cleared and rewritten,
+  // so loading a small moving grid into a large scene grid costs its box, not the grid.
+  Eigen::Vector3i input_min = Eigen::Vector3i::Zero(), input_max = Eigen::Vector3i::Constant(-1);
+  double phase_bins = 0.0;  // bins of the full spectrum that carry phase in the cross power
 
   ~Impl() {
     std::lock_guard<std::mutex> lock(planner_mutex());
@@ -111,26 +128,48 @@ struct PhaseCorrelation::Impl {
     half_z = spec.dims.z() / 2 + 1;
     real_count = spec.voxel_count();
     complex_count = static_cast<std::size_t>(spec.dims.x()) * spec.dims.y() * half_z;
-    real = allocate<float>(real_count);
-    moving_spectrum = allocate<Complex>(complex_count);
-    cross_power = allocate<Complex>(complex_count);
+    input = allocate<float>(real_count);
+    output = allocate<float>(real_count);
+    std::fill(input.get(), input.get() + real_count, 0.0f);
+    spectrum = allocate<Complex>(complex_count);
     target_spectrum = allocate<Complex>(complex_count);
     init_fftw_threads();
     std::lock_guard<std::mutex> lock(planner_mutex());
     fftwf_plan_with_nthreads(params.threads);
     // FFTW_ESTIMATE: the plan, and so every result bit, is the same on every run.
-    forward = fftwf_plan_dft_r2c_3d(spec.dims.x(), spec.dims.y(), spec.dims.z(), real.get(),
-                                    reinterpret_cast<fftwf_complex*>(moving_spectrum.get()),
+    forward = fftwf_plan_dft_r2c_3d(spec.dims.x(), spec.dims.y(), spec.dims.z(), input.get(),
+                                    reinterpret_cast<fftwf_complex*>(spectrum.get()),
                                     FFTW_ESTIMATE);
     inverse = fftwf_plan_dft_c2r_3d(spec.dims.x(), spec.dims.y(), spec.dims.z(),
-                                    reinterpret_cast<fftwf_complex*>(cross_power.get()),
-                                    real.get(), FFTW_ESTIMATE);
+                                    reinterpret_cast<fftwf_complex*>(spectrum.get()),
+                                    output.get(), FFTW_ESTIMATE);
     if (!forward || !inverse) fail("grid: FFTW could not plan a ", spec.dims.transpose(), " transform");
   }
 
+  // Calls f(offset, length) for each z-run of the box [lo, hi] in the grid's linear order.
+  template <typename F>
+  void for_each_row(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi, F f) const {
+    if ((lo.array() > hi.array()).any()) return;
+    const std::size_t ny = spec.dims.y(), nz = spec.dims.z();
+    for (int i = lo.x(); i <= hi.x(); ++i)
+      for (int j = lo.y(); j <= hi.y(); ++j) f((i * ny + j) * nz + lo.z(), std::size_t(hi.z() - lo.z() + 1));
+  }
+
+  // Copies the occupied box of `grid` into `input` after clearing the previous box:
+  // a VoxelGrid is zero outside its occupied box.
+  void load_input(const VoxelGrid& grid) {
+    float* in = input.get();
+    for_each_row(input_min, input_max, [&](std::size_t at, std::size_t n) { std::fill_n(in + at, n, 0.0f); });
+    const float* values = grid.values.data();
+    for_each_row(grid.occupied_min, grid.occupied_max,
+                 [&](std::size_t at, std::size_t n) { std::copy_n(values + at, n, in + at); });
+    input_min = grid.occupied_min;
+    input_max = grid.occupied_max;
+  }
+
   void transform(const VoxelGrid& grid, Complex* out) {
-    std::copy(grid.values.begin(), grid.values.end(), real.get());
-    fftwf_execute_dft_r2c(forward, real.get(), reinterpret_cast<fftwf_complex*>(out));
+    load_input(grid);
+    fftwf_execute_dft_r2c(forward, input.get(), reinterpret_cast<fftwf_complex*>(out));
   }
 
   // Normalised cross-power spectrum of eq. (7), oriented so that its inverse peaks at
@@ -139,18 +178,21 @@ struct PhaseCorrelation::Impl {
   // phase (no energy in either grid) and is left out. Written on plain floats, without
   // branches, so that the compiler vectorises the loop.
   void form_cross_power() {
-    const float floor = std::abs(target_spectrum[0] * moving_spectrum[0]) * 1e-6f;
+    const float floor = std::abs(target_spectrum[0] * spectrum[0]) * 1e-6f;
     const float floor_power = floor * floor;
     const float* t = reinterpret_cast<const float*>(target_spectrum.get());
-    const float* m = reinterpret_cast<const float*>(moving_spectrum.get());
-    float* out = reinterpret_cast<float*>(cross_power.get());
-    std::size_t kept = 0;
+    float* m = reinterpret_cast<float*>(spectrum.get());
+    float* out = m;
+    // The scale is computed for every bin (clamped away from 0) and then masked: a
+    // division under a condition would stop the vectoriser.
+    const float smallest = std::max(floor_power, std::numeric_limits<float>::min());
+    int kept = 0;
     for (std::size_t i = 0; i < complex_count; ++i) {
       const float re = t[2 * i] * m[2 * i] + t[2 * i + 1] * m[2 * i + 1];
       const float im = t[2 * i + 1] * m[2 * i] - t[2 * i] * m[2 * i + 1];
       const float power = re * re + im * im;
-      const bool keep = power > floor_power;
-      const float scale = keep ? 1.0f / std::sqrt(power) : 0.0f;
+      const int keep = power > floor_power;
+      const float scale = (1.0f / std::sqrt(std::max(power, smallest))) * static_cast<float>(keep);
       out[2 * i] = re * scale;
       out[2 * i + 1] = im * scale;
       kept += keep;
@@ -160,18 +202,23 @@ struct PhaseCorrelation::Impl {
     std::size_t kept_edge = 0;
     const int nz = spec.dims.z();
     for (std::size_t row = 0; row < complex_count; row += half_z) {
-      kept_edge += cross_power[row] != Complex(0.0f, 0.0f);
-      if (nz % 2 == 0) kept_edge += cross_power[row + half_z - 1] != Complex(0.0f, 0.0f);
+      kept_edge += spectrum[row] != Complex(0.0f, 0.0f);
+      if (nz % 2 == 0) kept_edge += spectrum[row + half_z - 1] != Complex(0.0f, 0.0f);
     }
-    phase_bins = static_cast<double>(2 * kept - kept_edge);
+    phase_bins = 2.0 * double(kept) - double(kept_edge);
   }
 
-  Eigen::Vector3i find_peak(const VoxelGrid& moving, float& height) const {
+  // The largest correlation over feasible shifts. Along z the feasible indices form at
+  // most two runs; each run's maximum is a vectorised reduction, and the index is
+  // searched only in a run that beats the best so far.
+  Eigen::Vector3i find_peak(const VoxelGrid& moving, const Eigen::Vector3i& max_shift, float& height) const {
     std::vector<int> shifts[3];
     for (int axis = 0; axis < 3; ++axis) {
-      shifts[axis] = unfolded_shifts(spec.dims[axis], target_min[axis] - moving.occupied_max[axis],
-                                     target_max[axis] - moving.occupied_min[axis]);
+      shifts[axis] = unfolded_shifts(spec.dims[axis],
+                                     std::max(target_min[axis] - moving.occupied_max[axis], -max_shift[axis]),
+                                     std::min(target_max[axis] - moving.occupied_min[axis], max_shift[axis]));
     }
+    const std::vector<std::pair<int, int>> runs = feasible_runs(shifts[2]);
     const int ny = spec.dims.y(), nz = spec.dims.z();
     height = -INFINITY;
     Eigen::Vector3i best = Eigen::Vector3i::Zero();
@@ -179,27 +226,49 @@ struct PhaseCorrelation::Impl {
       if (shifts[0][i] == INT_MIN) continue;
       for (int j = 0; j < ny; ++j) {
         if (shifts[1][j] == INT_MIN) continue;
-        const float* row = real.get() + (static_cast<std::size_t>(i) * ny + j) * nz;
-        for (int k = 0; k < nz; ++k) {
-          if (row[k] > height && shifts[2][k] != INT_MIN) {
-            height = row[k];
-            best = {shifts[0][i], shifts[1][j], shifts[2][k]};
-          }
+        const float* row = output.get() + (static_cast<std::size_t>(i) * ny + j) * nz;
+        for (const auto& [begin, end] : runs) {
+          const float run_max = Eigen::Map<const Eigen::ArrayXf>(row + begin, end - begin).maxCoeff();
+          if (!(run_max > height)) continue;
+          const int k = static_cast<int>(std::find(row + begin, row + end, run_max) - row);
+          height = run_max;
+          best = {shifts[0][i], shifts[1][j], shifts[2][k]};
         }
       }
     }
     return best;
   }
 
-  // The bins of the half spectrum with |f| < band on every axis, found once per grid.
-  struct LowBin {
-    std::size_t index;
-    Eigen::Vector3d f;  // cycles per voxel
-    double weight;      // 2 for an inner bin, which also stands for its conjugate twin
+  // The maximal runs [begin, end) of feasible indices.
+  static std::vector<std::pair<int, int>> feasible_runs(const std::vector<int>& shifts) {
+    std::vector<std::pair<int, int>> runs;
+    const int n = static_cast<int>(shifts.size());
+    for (int k = 0; k < n;) {
+      if (shifts[k] == INT_MIN) {
+        ++k;
+        continue;
+      }
+      const int begin = k;
+      while (k < n && shifts[k] != INT_MIN) ++k;
+      runs.emplace_back(begin, k);
+    }
+    return runs;
+  }
+
+  // The bins of the half spectrum with |f| < band on every axis, found once per grid,
+  // as separate arrays so that the fit's passes are plain loops over floats.
+  struct LowBins {
+    std::vector<std::size_t> index;
+    std::vector<float> fx, fy, fz;  // frequency, cycles per voxel
+    std::vector<float> weight;      // 2 for an inner bin, which also stands for its twin
+    Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();  // sum of weight f f^T over all bins
+    std::size_t size() const { return index.size(); }
   };
-  std::vector<LowBin> low_bins;
-  mutable std::vector<double> low_angles;  // per-call scratch of fit_phase_plane
-  mutable std::vector<char> low_valid;
+  LowBins low;
+  // Per-call scratch of the fit: the products' phases, real parts and weights, and the
+  // normal matrix over the bins that carry phase.
+  std::vector<float> low_angles, low_reals, low_weights;
+  Eigen::Matrix3d low_normal;
 
   void find_low_bins() {
     const double band = params.subvoxel_band;
@@ -212,11 +281,36 @@ struct PhaseCorrelation::Impl {
         if (std::abs(fy) >= band) continue;
         for (int k = 0; k < half_z && k < band * nz; ++k) {
           if (i == 0 && j == 0 && k == 0) continue;  // DC carries no phase
-          const std::size_t index = (static_cast<std::size_t>(i) * ny + j) * half_z + k;
-          low_bins.push_back({index, Eigen::Vector3d(fx, fy, k / double(nz)),
-                              (k == 0 || 2 * k == nz) ? 1.0 : 2.0});
+          const Eigen::Vector3d f(fx, fy, k / double(nz));
+          const double weight = (k == 0 || 2 * k == nz) ? 1.0 : 2.0;
+          low.index.push_back((static_cast<std::size_t>(i) * ny + j) * half_z + k);
+          low.fx.push_back(float(f.x()));
+          low.fy.push_back(float(f.y()));
+          low.fz.push_back(float(f.z()));
+          low.weight.push_back(float(weight));
+          low.normal += weight * f * f.transpose();
         }
       }
+    }
+  }
+
+  // Reads the cross products target * conj(moving) at the low bins, before the
+  // spectrum is overwritten by the cross power: the fit's input.
+  void gather_low_bins() {
+    const std::size_t n = low.size();
+    low_angles.resize(n);
+    low_weights.resize(n);
+    low_reals.resize(n);
+    low_normal = low.normal;
+    for (std::size_t b = 0; b < n; ++b) {
+      const Complex product = target_spectrum[low.index[b]] * std::conj(spectrum[low.index[b]]);
+      low_angles[b] = product.imag();
+      low_reals[b] = product.real();
+      low_weights[b] = low.weight[b];
+      if (std::norm(product) > 0.0f) continue;
+      low_weights[b] = 0.0f;  // no energy, no phase
+      const Eigen::Vector3d f(low.fx[b], low.fy[b], low.fz[b]);
+      low_normal -= double(low.weight[b]) * f * f.transpose();
     }
   }
 
@@ -224,30 +318,32 @@ struct PhaseCorrelation::Impl {
   // after removing the integer peak: the sub-voxel residual d, in voxels. Two passes,
   // the second on the phases left by the first, so that a residual near half a voxel
   // does not wrap.
-  Eigen::Vector3d fit_phase_plane(const Eigen::Vector3i& peak) const {
-    std::vector<double>& angles = low_angles;
-    std::vector<char>& valid = low_valid;
-    angles.resize(low_bins.size());
-    valid.resize(low_bins.size());
-    const Eigen::Vector3d p = peak.cast<double>();
-    for (std::size_t b = 0; b < low_bins.size(); ++b) {
-      const std::size_t index = low_bins[b].index;
-      const Complex product = target_spectrum[index] * std::conj(moving_spectrum[index]);
-      valid[b] = std::norm(product) > 0.0f;
-      angles[b] = wrap_angle(fast_atan2(product.imag(), product.real()) + 2.0 * M_PI * low_bins[b].f.dot(p));
+  Eigen::Vector3d fit_phase_plane(const Eigen::Vector3i& peak) {
+    const std::size_t n = low.size();
+    float* angles = low_angles.data();
+    const float* reals = low_reals.data();
+    const float* weights = low_weights.data();
+    const float px = float(peak.x()), py = float(peak.y()), pz = float(peak.z());
+    const float *fx = low.fx.data(), *fy = low.fy.data(), *fz = low.fz.data();
+#pragma omp simd
+    for (std::size_t b = 0; b < n; ++b) {
+      const float shift_phase = kTwoPi * (fx[b] * px + fy[b] * py + fz[b] * pz);
+      angles[b] = wrap_angle(fast_atan2(angles[b], reals[b]) + shift_phase);
     }
     Eigen::Vector3d d = Eigen::Vector3d::Zero();
     for (int pass = 0; pass < 2; ++pass) {
-      Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
-      Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
-      for (std::size_t b = 0; b < low_bins.size(); ++b) {
-        if (!valid[b]) continue;
-        const LowBin& bin = low_bins[b];
-        const double residual = wrap_angle(angles[b] + 2.0 * M_PI * bin.f.dot(d));
-        normal.noalias() += bin.weight * bin.f * bin.f.transpose();
-        rhs.noalias() += bin.weight * residual * bin.f;
+      const float dx = float(d.x()), dy = float(d.y()), dz = float(d.z());
+      // Float sums in any order (omp simd): a few ulp over some 10^4 bins, far below the
+      // phase noise, for a vectorised pass.
+      float rx = 0.0f, ry = 0.0f, rz = 0.0f;
+#pragma omp simd reduction(+ : rx, ry, rz)
+      for (std::size_t b = 0; b < n; ++b) {
+        const float residual = weights[b] * wrap_angle(angles[b] + kTwoPi * (fx[b] * dx + fy[b] * dy + fz[b] * dz));
+        rx += residual * fx[b];
+        ry += residual * fy[b];
+        rz += residual * fz[b];
       }
-      const Eigen::Vector3d step = normal.ldlt().solve(rhs) / (-2.0 * M_PI);
+      const Eigen::Vector3d step = low_normal.ldlt().solve(Eigen::Vector3d(rx, ry, rz)) / (-2.0 * M_PI);
       if (!step.allFinite()) return Eigen::Vector3d::Zero();
       d += step;
     }
@@ -302,17 +398,23 @@ void PhaseCorrelation::set_target(const VoxelGrid& target) {
 }
 
 TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving) {
+  return estimate(moving, Eigen::Vector3i::Constant(INT_MAX / 2));
+}
+
+TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving, const Eigen::Vector3i& max_shift) {
   if (!impl_->has_target) fail("PhaseCorrelation: set_target() must be called before estimate()");
+  if ((max_shift.array() < 0).any()) fail("max_shift must be >= 0 voxels, got ", max_shift.transpose());
   require_same_spec(impl_->spec, moving, "moving");
   Impl& im = *impl_;
-  im.transform(moving, im.moving_spectrum.get());
+  im.transform(moving, im.spectrum.get());
+  if (im.params.subvoxel) im.gather_low_bins();
   im.form_cross_power();
-  fftwf_execute_dft_c2r(im.inverse, reinterpret_cast<fftwf_complex*>(im.cross_power.get()),
-                        im.real.get());
+  fftwf_execute_dft_c2r(im.inverse, reinterpret_cast<fftwf_complex*>(im.spectrum.get()),
+                        im.output.get());
 
   TranslationEstimate result;
   float height = 0.0f;
-  result.peak_voxels = im.find_peak(moving, height);
+  result.peak_voxels = im.find_peak(moving, max_shift, height);
   result.peak = im.phase_bins > 0.0 ? std::clamp(double(height) / im.phase_bins, 0.0, 1.0) : 0.0;
   result.shift_voxels = result.peak_voxels.cast<double>();
   if (im.params.subvoxel) result.shift_voxels += im.fit_phase_plane(result.peak_voxels);

@@ -59,6 +59,7 @@ class CameraIntrinsics:
 
     @property
     def fx(self) -> float:
+        """Horizontal focal length in pixels, equal to :attr:`fy`."""
         return self.fy
 
     @property
@@ -110,6 +111,7 @@ class DepthNoise:
 
     @property
     def enabled(self) -> bool:
+        """Whether any noise or missing pixels are configured."""
         return self.sigma_0 > 0.0 or self.sigma_quadratic > 0.0 or self.missing_fraction > 0.0
 
     def sigma(self, depth: np.ndarray) -> np.ndarray:
@@ -164,7 +166,17 @@ class NormalParams:
 
 @dataclass(frozen=True)
 class CameraParams:
-    """Everything about the simulated depth camera except where it is mounted."""
+    """Everything about the simulated depth camera except where it is mounted.
+
+    Attributes
+    ----------
+    intrinsics : CameraIntrinsics
+        Image size, field of view and clipping planes.
+    noise : DepthNoise
+        Depth noise and missing pixels (none by default).
+    normals : NormalParams
+        How normals are computed from the organized depth image.
+    """
 
     intrinsics: CameraIntrinsics = field(default_factory=CameraIntrinsics)
     noise: DepthNoise = field(default_factory=DepthNoise)
@@ -175,14 +187,38 @@ class CameraParams:
 
 
 def view_matrix(T_world_camera: np.ndarray) -> list[float]:
-    """PyBullet's view matrix (column-major OpenGL) for a vision camera at ``T_world_camera``."""
+    """PyBullet's view matrix (column-major OpenGL) for a vision camera at ``T_world_camera``.
+
+    Parameters
+    ----------
+    T_world_camera : ndarray, shape (4, 4)
+        Pose of the vision camera frame (Z forward, X right, Y down) in the world.
+
+    Returns
+    -------
+    list of float
+        The 16 entries of T_opengl_world in column-major order.
+    """
     T_opengl_world = np.linalg.inv(np.asarray(T_world_camera, dtype=float) @ OPENGL_FROM_VISION)
     return T_opengl_world.T.reshape(-1).tolist()
 
 
 def linearize_depth(buffer: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
     """Metric planar depth (metres) from an OpenGL depth buffer in [0, 1]; NaN where
-    nothing was hit (buffer = 1, the far plane)."""
+    nothing was hit (buffer = 1, the far plane).
+
+    Parameters
+    ----------
+    buffer : ndarray, shape (H, W)
+        Non-linear depth buffer as PyBullet returns it.
+    intrinsics : CameraIntrinsics
+        Its ``near`` and ``far`` planes undo the projection.
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+        Depth along the optical axis, metres.
+    """
     near, far = intrinsics.near, intrinsics.far
     buffer = np.asarray(buffer, dtype=np.float64)
     depth = far * near / (far - (far - near) * buffer)
@@ -200,6 +236,11 @@ def render_depth(client, T_world_camera: np.ndarray, intrinsics: CameraIntrinsic
     T_world_camera : ndarray, shape (4, 4)
         Pose of the vision camera frame in the world.
     intrinsics : CameraIntrinsics
+
+    Returns
+    -------
+    ndarray, shape (height, width)
+        Depth along the optical axis, metres; NaN beyond ``far`` or where nothing is hit.
     """
     w, h = intrinsics.width, intrinsics.height
     projection = client.computeProjectionMatrixFOV(
@@ -223,7 +264,20 @@ def render_depth(client, T_world_camera: np.ndarray, intrinsics: CameraIntrinsic
 
 
 def back_project(depth: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
-    """Organized points (H, W, 3) in the camera frame from a planar depth image (metres)."""
+    """Organized points (H, W, 3) in the camera frame from a planar depth image (metres).
+
+    Parameters
+    ----------
+    depth : ndarray, shape (H, W)
+        Depth along the optical axis, metres; NaN propagates to the points.
+    intrinsics : CameraIntrinsics
+        The pinhole model (focal lengths and principal point).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3)
+        Point of each pixel, metres, camera frame.
+    """
     h, w = depth.shape
     u = (np.arange(w) - intrinsics.cx) / intrinsics.fx
     v = (np.arange(h) - intrinsics.cy) / intrinsics.fy
@@ -255,7 +309,21 @@ def organized_normals(points: np.ndarray, params: NormalParams = NormalParams())
     NaN where no reliable normal exists (see :class:`NormalParams`).
 
     Computed per coordinate plane in float32 (4x faster than interleaved float64; the
-    normals differ by about 1e-5 rad)."""
+    normals differ by about 1e-5 rad).
+
+    Parameters
+    ----------
+    points : ndarray, shape (H, W, 3)
+        Organized points in the camera frame (:func:`back_project`), metres.
+    params : NormalParams
+        Stencil, averaging window and depth-jump threshold.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3)
+        Unit normals; NaN rows where none is reliable (including a border of
+        ``normal_step`` pixels).
+    """
     s = params.normal_step
     h, w = points.shape[:2]
     normals = np.full((h, w, 3), np.nan)
@@ -294,7 +362,27 @@ def depth_to_cloud(
     depth: np.ndarray, intrinsics: CameraIntrinsics, params: NormalParams = NormalParams()
 ) -> PointCloud:
     """The point cloud with normals of a planar depth image (metres, NaN = missing), in
-    the camera frame; pixels without a point or a reliable normal are dropped."""
+    the camera frame; pixels without a point or a reliable normal are dropped.
+
+    Parameters
+    ----------
+    depth : ndarray, shape (height, width)
+        Depth along the optical axis, metres, as from :func:`render_depth`.
+    intrinsics : CameraIntrinsics
+        The camera that took it; its size must match ``depth``.
+    params : NormalParams
+        Normal estimation and the pixel ``stride``.
+
+    Returns
+    -------
+    PointCloud
+        Points and unit normals oriented toward the camera, camera frame.
+
+    Raises
+    ------
+    ValueError
+        If ``depth`` does not have the shape (height, width) of ``intrinsics``.
+    """
     depth = np.asarray(depth, dtype=np.float64)
     expected = (intrinsics.height, intrinsics.width)
     if depth.shape != expected:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
@@ -95,7 +96,20 @@ def pose_matrix(position, quaternion) -> np.ndarray:
     """4 x 4 transform from a PyBullet position and (x, y, z, w) quaternion.
 
     PyBullet's quaternions are unit length only to float precision (about 1e-7); the
-    quaternion is normalised so that the rotation is orthonormal to double precision."""
+    quaternion is normalised so that the rotation is orthonormal to double precision.
+
+    Parameters
+    ----------
+    position : array_like, shape (3,)
+        Translation, metres.
+    quaternion : array_like, shape (4,)
+        Rotation as PyBullet orders it: (x, y, z, w); any non-zero length.
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        The rigid transform.
+    """
     x, y, z, w = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)
     T = np.eye(4)
     T[:3, :3] = [
@@ -184,8 +198,19 @@ class PyBulletRobot:
         """The ``BulletClient`` of this simulation."""
         return self._client
 
-    def reset_joint_positions(self, q: np.ndarray) -> None:
-        """Teleport the arm to ``q`` (rad) at rest; the motors then hold it."""
+    def reset_joint_positions(self, q: npt.ArrayLike) -> None:
+        """Teleport the arm to ``q`` at rest; the motors then hold it.
+
+        Parameters
+        ----------
+        q : array_like, shape (7,)
+            Joint positions, rad.
+
+        Raises
+        ------
+        ValueError
+            If ``q`` does not hold 7 finite values.
+        """
         q = np.asarray(q, dtype=float)
         if q.shape != (len(self._joints),) or not np.all(np.isfinite(q)):
             raise ValueError(f"q must be {len(self._joints)} finite joint positions, got {q!r}")
@@ -212,7 +237,18 @@ class PyBulletRobot:
 
     def T_base_camera(self, q: np.ndarray | None = None) -> np.ndarray:
         """T_base_camera from the KDL kinematics at ``q`` (the current joints by default).
-        The base frame is the world frame."""
+        The base frame is the world frame.
+
+        Parameters
+        ----------
+        q : ndarray, shape (7,), optional
+            Joint positions, rad.
+
+        Returns
+        -------
+        ndarray, shape (4, 4)
+            Pose of the camera frame in the base frame.
+        """
         return self.kinematics.forward(self.joint_positions() if q is None else q)
 
     def close(self) -> None:

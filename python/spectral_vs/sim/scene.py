@@ -68,7 +68,19 @@ class SceneParams:
 
 @dataclass(frozen=True)
 class PlacedObject:
-    """An object of the scene: its PyBullet body id, URDF and pose."""
+    """An object of the scene: its PyBullet body id, URDF and pose.
+
+    Attributes
+    ----------
+    body_id : int
+        PyBullet body unique id.
+    urdf : str
+        URDF path relative to ``pybullet_data``.
+    position : tuple of float
+        Position (x, y, z) of the URDF's frame, metres, world frame.
+    yaw : float
+        Rotation about the vertical axis, radians.
+    """
 
     body_id: int
     urdf: str
@@ -83,6 +95,18 @@ def build_scene(client, params: SceneParams) -> list[PlacedObject]:
     axis-aligned footprint keeps ``min_gap`` from the others (rejection sampling,
     restarted from the first object when one does not fit); all rest on the table top
     and are static, so the scene depends only on the seed.
+
+    Parameters
+    ----------
+    client
+        A ``pybullet_utils.bullet_client.BulletClient`` (or the ``pybullet`` module).
+    params : SceneParams
+        The table and the clutter.
+
+    Returns
+    -------
+    list of PlacedObject
+        The clutter objects in the order they were loaded.
 
     Raises
     ------
@@ -118,7 +142,8 @@ def build_scene(client, params: SceneParams) -> list[PlacedObject]:
         client.resetBasePositionAndOrientation(
             body, (np.asarray(inertial) + shift).tolist(), orientation
         )
-        placed.append(PlacedObject(body, urdf, tuple(float(v) for v in shift), yaw))
+        x, y, z = (float(v) for v in shift)
+        placed.append(PlacedObject(body, urdf, (x, y, z), yaw))
     return placed
 
 

@@ -39,6 +39,15 @@ struct AlignParams {
   int hypotheses = 16;         ///< Rotations of the global search that are refined and verified:
                                ///< enough to hold the true one among the near-equal maxima of
                                ///< an object with symmetric faces.
+  int refinements = 3;         ///< The best-verified hypotheses that Algorithm 1 then runs from,
+                               ///< each in a window of the scene around it; the one with the
+                               ///< best final fitness is kept. In [1, hypotheses].
+  double search_voxel_size = 0.0;  ///< Voxel of the global search's translation grid, metres.
+                                   ///< 0: twice voxel_size, coarser where needed to keep that
+                                   ///< grid under 2^19 voxels (large scenes).
+  double window_margin = 0.0;  ///< How far the model may move per window placement, metres:
+                               ///< local windows are the model's reach plus this on each side.
+                               ///< 0: the larger of 5 voxels and 2.5 search voxels.
   bool subvoxel = true;        ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;  ///< Voxel values (the paper: binary).
   EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
@@ -69,6 +78,10 @@ struct AlignResult {
   double correlation = 0.0;       ///< Final normalised EGI correlation C(R).
   double translation_peak = 0.0;  ///< Final phase-correlation peak height.
   int hypothesis = 0;             ///< Index of the kept global-search hypothesis (0 without).
+  /// The voxel sizes the alignment worked at, metres: the global search's translation
+  /// grid (0 without global search) and the windows of Algorithm 1.
+  double search_voxel_size = 0.0;
+  Eigen::Vector3i window_dims = Eigen::Vector3i::Zero();  ///< Voxels of the local window.
   std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
 };
 

@@ -30,9 +30,10 @@ struct GridLimits {
   std::size_t max_voxels = std::size_t{512} * 512 * 512;  ///< Refuse grids with more voxels.
 };
 
-/// Smallest even n' >= max(n, 2) whose prime factors are all in {2, 3, 5}. FFTW is
-/// fastest on these: measured here, a 112 x 100 x 32 real transform pair takes 2.6 ms
-/// against 3.8 ms for the smaller 105 x 98 x 32 (factors of 7, odd sizes).
+/// Smallest transform length n' >= n on which FFTW's estimated (deterministic) plans are
+/// fast: a measured table up to 1024 (lengths such as 16, 20, 32, 48, 64, 80, 100, 128;
+/// not 60 or 96, which took twice the time per voxel of 64 or 100), then the even
+/// products of 2, 3 and 5.
 int fft_friendly_size(int n);
 
 /// A grid holding two clouds' bounding boxes in which the circular correlation of
@@ -71,7 +72,9 @@ struct VoxelGrid {
   }
 };
 
-/// Voxelizes `points` into `grid` (re-using its memory when the spec is unchanged).
+/// Voxelizes `points` into `grid`, re-using its memory when the spec is unchanged. Then
+/// only the previous occupied box is cleared: a grid filled by hand must be zero outside
+/// its occupied box, as every grid made here is.
 /// @throws std::invalid_argument if the spec is invalid or over `limits`.
 void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy,
                    VoxelGrid& grid, const GridLimits& limits = {});

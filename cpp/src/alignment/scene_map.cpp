@@ -1,0 +1,182 @@
+#include "alignment/scene_map.hpp"
+
+#include "common/checks.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace spectral_vs::detail {
+
+namespace {
+
+Eigen::AlignedBox3d cube(const Eigen::Vector3d& centre, double half_width) {
+  return {centre - Eigen::Vector3d::Constant(half_width), centre + Eigen::Vector3d::Constant(half_width)};
+}
+
+std::size_t linear(const GridSpec& spec, const Eigen::Vector3i& v) {
+  return (std::size_t(v.x()) * spec.dims.y() + v.y()) * spec.dims.z() + v.z();
+}
+
+void voxelize_subset(const PointCloud& cloud, const std::vector<Eigen::Index>& rows, const GridSpec& spec,
+                     Occupancy occupancy, VoxelGrid& grid, const GridLimits& limits) {
+  Points points(static_cast<Eigen::Index>(rows.size()), 3);
+  for (std::size_t i = 0; i < rows.size(); ++i) points.row(Eigen::Index(i)) = cloud.points().row(rows[i]);
+  voxelize_into(points, spec, occupancy, grid, limits);
+}
+
+}  // namespace
+
+SceneMap::SceneMap(const PointCloud& scene, double voxel_size, const GridLimits& limits) : scene_(&scene) {
+  const Eigen::AlignedBox3d box = bounding_box(scene);
+  spec_.resolution = voxel_size;
+  spec_.origin = ((box.min() / voxel_size).array().floor() - 2.0).matrix() * voxel_size;
+  for (int axis = 0; axis < 3; ++axis) {
+    spec_.dims[axis] = static_cast<int>(std::ceil((box.max()[axis] - spec_.origin[axis]) / voxel_size)) + 3;
+  }
+  if (spec_.voxel_count() > limits.max_voxels) {
+    fail("voxel_size: the scene spans ", spec_.dims.transpose(), " voxels at ", voxel_size,
+         " m, which exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
+  }
+  near_.assign(spec_.voxel_count(), 0);
+  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
+    const Eigen::Vector3i v = spec_.index_of(scene.points().row(i).transpose());
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] = 1;
+  }
+}
+
+double SceneMap::fitness(const Points& points) const {
+  // Distinct voxels of the model, as 21-bit-per-axis keys (inside the map or not).
+  seen_.clear();
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    const Eigen::Vector3i v = spec_.index_of(points.row(i).transpose());
+    const Eigen::Array3i clamped = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
+    seen_.push_back((std::uint64_t(clamped.x()) << 42) | (std::uint64_t(clamped.y()) << 21) | std::uint64_t(clamped.z()));
+  }
+  std::sort(seen_.begin(), seen_.end());
+  seen_.erase(std::unique(seen_.begin(), seen_.end()), seen_.end());
+  std::size_t supported = 0;
+  for (const std::uint64_t key : seen_) {
+    const Eigen::Vector3i v(int(key >> 42) - (1 << 20), int((key >> 21) & 0x1FFFFF) - (1 << 20),
+                            int(key & 0x1FFFFF) - (1 << 20));
+    supported += spec_.contains(v) && near_[linear(spec_, v)];
+  }
+  return seen_.empty() ? 0.0 : double(supported) / double(seen_.size());
+}
+
+std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) const {
+  std::vector<Eigen::Index> rows;
+  const Points& p = scene_->points();
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    if (box.contains(p.row(i).transpose())) rows.push_back(i);
+  }
+  return rows;
+}
+
+namespace {
+
+GridSpec window_spec(double half_width, double voxel_size, const GridLimits& limits) {
+  GridSpec spec;
+  spec.resolution = voxel_size;
+  // The window plus one voxel on each side, so a shift by the margin stays unaliased.
+  const int n = fft_friendly_size(static_cast<int>(std::ceil(2.0 * half_width / voxel_size)) + 3);
+  spec.dims = Eigen::Vector3i::Constant(n);
+  if (spec.voxel_count() > limits.max_voxels) {
+    fail("voxel_size: a window of ", n, "^3 voxels at ", voxel_size, " m exceeds the limit of ",
+         limits.max_voxels, " voxels (max_voxels)");
+  }
+  return spec;
+}
+
+}  // namespace
+
+TranslationWindow::TranslationWindow(const SceneMap& scene, double reach, double margin,
+                                     const Eigen::Vector3d& centre, double voxel_size, Occupancy occupancy,
+                                     const PhaseCorrelationParams& params, const GridLimits& limits)
+    : scene_(&scene),
+      occupancy_(occupancy),
+      limits_(limits),
+      half_width_(reach + margin),
+      margin_(margin),
+      max_shift_(Eigen::Vector3i::Constant(static_cast<int>(std::ceil(margin / voxel_size)))),
+      spec_(window_spec(half_width_, voxel_size, limits)),
+      phase_(spec_, params) {
+  place(centre);
+}
+
+void TranslationWindow::place(const Eigen::Vector3d& centre) {
+  centre_ = centre;
+  const double r = spec_.resolution;
+  // Snapped to the voxel lattice: windows placed anywhere share voxel boundaries.
+  spec_.origin = (((centre.array() - half_width_) / r).floor() - 1.0).matrix() * r;
+  const std::vector<Eigen::Index> rows = scene_->points_in(cube(centre, half_width_));
+  voxelize_subset(scene_->cloud(), rows, spec_, occupancy_, target_, limits_);
+  target_energy_ = grid_energy(target_);
+  if (!target_.empty()) phase_.set_target(target_);
+}
+
+void TranslationWindow::follow(const Eigen::Vector3d& centre) {
+  if ((centre - centre_).cwiseAbs().maxCoeff() > 0.5 * margin_) place(centre);
+}
+
+TranslationEstimate TranslationWindow::estimate(const Points& moved) {
+  voxelize_into(moved, spec_, occupancy_, moving_, limits_);
+  // No scene in the window, or the model outside it: no translation evidence.
+  if (target_.empty() || moving_.empty()) return {};
+  return phase_.estimate(moving_, max_shift_);
+}
+
+double TranslationWindow::translation_cost() const {
+  return spectral_vs::translation_cost(moving_, target_, Eigen::Vector3i::Zero(), target_energy_);
+}
+
+namespace {
+
+GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
+                    const GridLimits& limits) {
+  const Eigen::AlignedBox3d scene_box = bounding_box(scene.cloud());
+  const Eigen::AlignedBox3d hull = cube(start, reach);
+  GridSpec spec = make_grid_spec(hull, scene_box, voxel_size, limits);
+  Eigen::AlignedBox3d cover = scene_box;
+  cover.min().array() -= reach;
+  cover.max().array() += reach;
+  cover.extend(hull);
+  const Eigen::Vector3d origin = ((cover.min() / voxel_size).array().floor() - 1.0).matrix() * voxel_size;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int needed = static_cast<int>(std::ceil((cover.max()[axis] - origin[axis]) / voxel_size)) + 2;
+    spec.dims[axis] = fft_friendly_size(std::max(spec.dims[axis], needed));
+  }
+  spec.origin = origin;
+  if (spec.voxel_count() > limits.max_voxels) {
+    fail("voxel_size: a translation grid of ", spec.dims.transpose(), " voxels at ", voxel_size,
+         " m exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
+  }
+  return spec;
+}
+
+}  // namespace
+
+SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach,
+                                   double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
+                                   const GridLimits& limits)
+    : occupancy_(occupancy),
+      limits_(limits),
+      spec_(scene_spec(scene, start, reach, voxel_size, limits)),
+      phase_(spec_, params) {
+  target_ = voxelize(scene.cloud(), spec_, occupancy, limits);
+  target_energy_ = grid_energy(target_);
+  phase_.set_target(target_);
+}
+
+TranslationEstimate SceneTranslation::estimate(const Points& moved) {
+  voxelize_into(moved, spec_, occupancy_, moving_, limits_);
+  if (moving_.empty()) fail("initial_guess: the model falls outside the scene's grid");
+  return phase_.estimate(moving_);
+}
+
+double SceneTranslation::translation_cost() const {
+  return spectral_vs::translation_cost(moving_, target_, Eigen::Vector3i::Zero(), target_energy_);
+}
+
+}  // namespace spectral_vs::detail

@@ -1,0 +1,95 @@
+#pragma once
+// Internal to the aligner: the scene as the aligner queries it, and the voxel grids in
+// which the model's translation is found.
+
+#include <spectral_vs/representation/point_cloud.hpp>
+#include <spectral_vs/representation/voxel_grid.hpp>
+#include <spectral_vs/translation/phase_correlation.hpp>
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <vector>
+
+namespace spectral_vs::detail {
+
+/// Which voxels of the scene's box lie within one voxel of a scene point, for the
+/// fitness of a pose; and the scene points near a place, for windows.
+class SceneMap {
+public:
+  /// @throws std::invalid_argument if the map at `voxel_size` exceeds `limits`.
+  SceneMap(const PointCloud& scene, double voxel_size, const GridLimits& limits);
+
+  const PointCloud& cloud() const { return *scene_; }
+
+  /// Fraction of the occupied voxels of `points` that are next to scene points, in [0, 1].
+  double fitness(const Points& points) const;
+
+  /// Indices of the scene points inside the axis-aligned box.
+  std::vector<Eigen::Index> points_in(const Eigen::AlignedBox3d& box) const;
+
+private:
+  const PointCloud* scene_;
+  GridSpec spec_;
+  std::vector<std::uint8_t> near_;
+  mutable std::vector<std::uint64_t> seen_;  // scratch of fitness: voxel keys of the model
+};
+
+/// A cubic window of the scene around the model, on a grid only as large as the window:
+/// the shift is bounded by the margin, which keeps the small grid free of wrap-around.
+/// Re-placed (the scene re-voxelized and transformed) when the model leaves its centre.
+class TranslationWindow {
+public:
+  /// A window of half-width `reach + margin` metres, placed around `centre`.
+  TranslationWindow(const SceneMap& scene, double reach, double margin, const Eigen::Vector3d& centre,
+                    double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
+                    const GridLimits& limits);
+
+  /// Centres the window on `centre`: re-voxelizes and transforms the scene inside it.
+  void place(const Eigen::Vector3d& centre);
+  /// Moves the window if `centre` is more than half the margin from its centre.
+  void follow(const Eigen::Vector3d& centre);
+
+  /// The shift of `moved` (model points in the scene) onto the scene, and J_t.
+  TranslationEstimate estimate(const Points& moved);
+  double translation_cost() const;
+
+  const Eigen::Vector3d& centre() const { return centre_; }
+  double half_width() const { return half_width_; }
+  const Eigen::Vector3i& dims() const { return spec_.dims; }
+
+private:
+  const SceneMap* scene_;
+  Occupancy occupancy_;
+  GridLimits limits_;
+  double half_width_, margin_;
+  Eigen::Vector3i max_shift_;
+  GridSpec spec_;
+  PhaseCorrelation phase_;
+  Eigen::Vector3d centre_;
+  VoxelGrid target_, moving_;
+  double target_energy_ = 0.0;
+};
+
+/// The translation over the whole scene: a grid holding the scene grown by the model's
+/// reach (the model may end anywhere in it) and the model's hull where it starts, with
+/// room against wrap-around. At a coarse voxel it places the hypotheses of the global
+/// search; at the alignment's voxel it is the paper's translation step.
+class SceneTranslation {
+public:
+  SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
+                   Occupancy occupancy, const PhaseCorrelationParams& params, const GridLimits& limits);
+
+  TranslationEstimate estimate(const Points& moved);
+  double translation_cost() const;
+  const GridSpec& spec() const { return spec_; }
+
+private:
+  Occupancy occupancy_;
+  GridLimits limits_;
+  GridSpec spec_;
+  PhaseCorrelation phase_;
+  VoxelGrid target_, moving_;
+  double target_energy_ = 0.0;
+};
+
+}  // namespace spectral_vs::detail

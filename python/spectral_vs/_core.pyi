@@ -1,0 +1,447 @@
+"""Type stubs of the compiled module spectral_vs._core (bindings/*.cpp).
+
+Written by hand, one section per bindings file, classes in the order of the C++
+structs. Fields a binding exposes with ``def_readwrite`` (or a ``def_property`` with a
+setter of the same type) are plain annotations; read-only fields are ``@property``.
+Shapes and units are in the comments; arrays are float64 unless said otherwise.
+
+tests/python/test_stubs.py fails when these stubs drift from the module: it runs
+``python -m mypy.stubtest spectral_vs._core`` (names, classes, read-only fields) and
+compares every signature with the one pybind11 records in the docstring (parameter
+names, order, keyword-only markers and literal defaults; a default that is not a
+literal is written ``...``). For a new binding, read what pybind11 records, e.g.
+``spectral_vs._core.voxelize.__doc__`` or the property types in ``help(AlignParams)``,
+or run ``pybind11-stubgen spectral_vs._core`` and copy the new lines here in this style.
+"""
+
+import os
+from typing import Any, Literal, TypeAlias, overload
+
+import numpy as np
+import numpy.typing as npt
+
+_Array: TypeAlias = npt.NDArray[np.float64]
+_IntArray: TypeAlias = npt.NDArray[np.int32]
+_Path: TypeAlias = str | os.PathLike[str]
+
+# String settings (occupancy, method, ...) are typed str: the bindings check them and
+# raise ValueError naming the valid choices, which the comments list.
+
+# --- Representation (bindings/representation.cpp) ---------------------------
+
+class PointCloud:
+    """Points in metres with optional unit surface normals."""
+
+    def __init__(
+        self,
+        points: npt.ArrayLike,  # (N, 3) float
+        normals: npt.ArrayLike | None = None,  # (N, 3) float
+        *,
+        drop_non_finite: bool = False,
+    ) -> None: ...
+    def __len__(self) -> int: ...
+    @property
+    def points(self) -> _Array: ...  # (N, 3), read-only view, metres
+    @property
+    def normals(self) -> _Array | None: ...  # (N, 3) unit normals, read-only view
+    @property
+    def has_normals(self) -> bool: ...
+    def centroid(self) -> _Array: ...  # (3,), metres
+    def transformed(self, T_target_source: npt.ArrayLike) -> PointCloud: ...  # (4, 4) rigid
+
+class CloudFileInfo:
+    """What a point cloud file held before loading."""
+
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def points_in_file(self) -> int: ...
+    @property
+    def non_finite_dropped(self) -> int: ...
+    @property
+    def had_normals(self) -> bool: ...
+
+def load_cloud_with_info(path: _Path) -> tuple[PointCloud, CloudFileInfo]: ...
+def save_cloud(path: _Path, cloud: PointCloud, encoding: str = "binary_compressed") -> None: ...
+def voxel_downsample(cloud: PointCloud, voxel_size: float) -> PointCloud: ...
+def estimate_normals(
+    cloud: PointCloud,
+    radius: float = 0.015,  # metres
+    k_neighbors: int = 0,
+    viewpoint: npt.ArrayLike = ...,  # (3,), metres; the origin by default
+    orientation: str = "toward_viewpoint",  # or "outward"
+    threads: int = 1,
+) -> PointCloud: ...
+
+class GridSpec:
+    """Origin (m), resolution (m) and dims (voxels) of a voxel grid."""
+
+    def __init__(self, origin: npt.ArrayLike, resolution: float, dims: npt.ArrayLike) -> None: ...
+    @property
+    def origin(self) -> _Array: ...  # (3,), metres
+    @property
+    def resolution(self) -> float: ...
+    @property
+    def dims(self) -> _IntArray: ...  # (3,), voxels
+    @property
+    def voxel_count(self) -> int: ...
+    def index_of(self, point: npt.ArrayLike) -> _IntArray: ...  # (3,)
+
+def fft_friendly_size(n: int) -> int: ...
+def make_grid_spec(
+    cloud_a: PointCloud, cloud_b: PointCloud, resolution: float, max_voxels: int = 134217728
+) -> GridSpec: ...
+
+class VoxelGrid:
+    """Voxel values on a GridSpec (eq. 1-2)."""
+
+    @property
+    def spec(self) -> GridSpec: ...
+    @property
+    def values(self) -> npt.NDArray[np.float32]: ...  # (nx, ny, nz), read-only view
+    @property
+    def points_outside(self) -> int: ...
+    @property
+    def occupied_min(self) -> _IntArray: ...  # (3,)
+    @property
+    def occupied_max(self) -> _IntArray: ...  # (3,)
+
+def voxelize(
+    cloud: PointCloud,
+    spec: GridSpec,
+    occupancy: str = "binary",  # "binary", "count" or "trilinear"
+    max_voxels: int = 134217728,
+) -> VoxelGrid: ...
+def egi(
+    cloud_or_normals: PointCloud | npt.ArrayLike,  # normals: (N, 3)
+    bandwidth: int,
+    weights: npt.ArrayLike | None = None,  # (N,)
+) -> _Array: ...  # (2B, 2B)
+def egi_cell(normal: npt.ArrayLike, bandwidth: int) -> _IntArray: ...  # (2,): (j, k)
+def sphere_grid(bandwidth: int) -> tuple[_Array, _Array]: ...  # theta_j (2B,), phi_k (2B,)
+
+# --- Translation (bindings/translation.cpp) ----------------------------------
+
+class TranslationEstimate:
+    """Shift of a moving grid onto a target: target(x) ~ moving(x - shift)."""
+
+    @property
+    def shift_voxels(self) -> _Array: ...  # (3,)
+    @property
+    def peak_voxels(self) -> _IntArray: ...  # (3,)
+    @property
+    def shift(self) -> _Array: ...  # (3,), metres
+    @property
+    def peak(self) -> float: ...
+
+class PhaseCorrelation:
+    """Phase correlation (eq. 7) against a cached target on a fixed grid."""
+
+    def __init__(
+        self,
+        spec: GridSpec,
+        subvoxel: bool = True,
+        subvoxel_band: float = 0.25,  # cycles per voxel
+        threads: int = 1,
+    ) -> None: ...
+    def set_target(self, target: VoxelGrid) -> None: ...
+    def estimate(
+        self,
+        moving: VoxelGrid,
+        max_shift: npt.ArrayLike | None = None,  # (3,) int, voxels per axis
+    ) -> TranslationEstimate: ...
+    @property
+    def has_target(self) -> bool: ...
+    @property
+    def spec(self) -> GridSpec: ...
+
+def phase_correlation(
+    grid_a: VoxelGrid | npt.ArrayLike,  # or a 3-D array
+    grid_b: VoxelGrid | npt.ArrayLike,
+    subvoxel: bool = True,
+    subvoxel_band: float = 0.25,
+) -> tuple[_Array, float]: ...  # shift (3,) in voxels, peak
+def translation_cost(
+    moving: VoxelGrid | npt.ArrayLike, target: VoxelGrid | npt.ArrayLike, shift: npt.ArrayLike
+) -> float: ...
+
+# --- Rotation (bindings/rotation.cpp) ----------------------------------------
+# Coefficient arrays are flat, shape (B**2,), entry l*l + l + m.
+
+def sh_index(l: int, m: int) -> int: ...
+def real_spherical_harmonics(direction: npt.ArrayLike, lmax: int) -> _Array: ...  # ((lmax+1)**2,)
+def sh_coefficients(grid: npt.ArrayLike, bandwidth: int) -> _Array: ...  # grid (2B, 2B) -> (B**2,)
+def sh_synthesis(coefficients: npt.ArrayLike, bandwidth: int) -> _Array: ...  # -> (2B, 2B)
+def wigner_real(R: npt.ArrayLike, lmax: int) -> list[_Array]: ...  # U^l, (2l+1, 2l+1)
+def wigner_generators(
+    lmax: int,
+) -> tuple[list[_Array], list[_Array], list[_Array]]: ...  # (u_x, u_y, u_z)
+def egi_coefficients(
+    normals_or_cloud: PointCloud | npt.ArrayLike,  # normals: (N, 3)
+    bandwidth: int,
+    method: str = "projection",  # or "histogram"
+    weights: npt.ArrayLike | None = None,  # (N,)
+) -> _Array: ...  # (B**2,)
+def smooth_coefficients(coefficients: npt.ArrayLike, bandwidth: int, sigma: float) -> _Array: ...
+
+class So3Correlation:
+    """The correlation C(R) of two EGI coefficient vectors, with re-used buffers."""
+
+    def __init__(
+        self,
+        target_coefficients: npt.ArrayLike,
+        model_coefficients: npt.ArrayLike,
+        normalised: bool = True,
+    ) -> None: ...
+    @overload
+    def evaluate(
+        self, R: npt.ArrayLike, hessian: Literal[False] = False
+    ) -> tuple[float, _Array]: ...  # C, gradient (3,)
+    @overload
+    def evaluate(
+        self, R: npt.ArrayLike, hessian: Literal[True]
+    ) -> tuple[float, _Array, _Array]: ...  # C, gradient (3,), Hessian (3, 3)
+    @overload
+    def evaluate(
+        self, R: npt.ArrayLike, hessian: bool = False
+    ) -> tuple[float, _Array] | tuple[float, _Array, _Array]: ...
+    @property
+    def bandwidth(self) -> int: ...
+    @property
+    def normalised(self) -> bool: ...
+
+@overload
+def so3_correlation(
+    target_coefficients: npt.ArrayLike,
+    model_coefficients: npt.ArrayLike,
+    R: npt.ArrayLike,  # (3, 3) rotation
+    normalised: bool = True,
+    hessian: Literal[False] = False,
+) -> tuple[float, _Array]: ...
+@overload
+def so3_correlation(
+    target_coefficients: npt.ArrayLike,
+    model_coefficients: npt.ArrayLike,
+    R: npt.ArrayLike,
+    normalised: bool = True,
+    *,
+    hessian: Literal[True],
+) -> tuple[float, _Array, _Array]: ...
+@overload
+def so3_correlation(
+    target_coefficients: npt.ArrayLike,
+    model_coefficients: npt.ArrayLike,
+    R: npt.ArrayLike,
+    normalised: bool = True,
+    hessian: bool = False,
+) -> tuple[float, _Array] | tuple[float, _Array, _Array]: ...
+def rotation_cost(
+    target_coefficients: npt.ArrayLike,
+    model_coefficients: npt.ArrayLike,
+    R: npt.ArrayLike,
+    normalised: bool = True,
+) -> float: ...
+def so3_search(
+    target_coefficients: npt.ArrayLike,
+    model_coefficients: npt.ArrayLike,
+    bandwidth: int,
+    k: int = 8,
+    threads: int = 1,
+    normalised: bool = True,
+) -> list[tuple[_Array, float]]: ...  # (R (3, 3), C), best first
+
+class RotationRefineResult:
+    """Outcome of refine_rotation."""
+
+    @property
+    def R(self) -> _Array: ...  # (3, 3)
+    @property
+    def correlation(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+
+def refine_rotation(
+    target_coefficients: npt.ArrayLike,
+    model_coefficients: npt.ArrayLike,
+    R0: npt.ArrayLike,  # (3, 3) rotation
+    gain: float = 0.05,  # radians per unit of gradient
+    max_iterations: int = 100,
+    gradient_tolerance: float = 1e-06,
+    newton: bool = True,
+    max_step: float = 0.25,  # radians
+    normalised: bool = True,
+) -> RotationRefineResult: ...
+def _rotation_timings(bandwidth: int, repeats: int) -> dict[str, float]: ...
+
+# --- Alignment (bindings/alignment.cpp) --------------------------------------
+
+class AlignParams:
+    """Settings of spectral_vs.align; fields as in the C++ struct, with its units."""
+
+    def __init__(self) -> None: ...
+    def __copy__(self) -> AlignParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> AlignParams: ...
+    voxel_size: float  # metres
+    bandwidth: int
+    translation_gain: float
+    rotation_gain: float
+    rotation_step: str  # "newton" or "gradient"
+    max_rotation_step: float  # radians
+    tolerance: float
+    max_iterations: int
+    @property
+    def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
+    @initial_guess.setter
+    def initial_guess(self, value: npt.ArrayLike) -> None: ...
+    global_search: bool
+    hypotheses: int
+    refinements: int
+    search_voxel_size: float  # metres, 0: automatic
+    window_margin: float  # metres, 0: automatic
+    subvoxel: bool
+    occupancy: str  # "trilinear", "binary" or "count"
+    egi_method: str  # "projection" or "histogram"
+    threads: int
+    max_voxels: int
+
+class AlignIteration:
+    """One iteration of Algorithm 1, after its update."""
+
+    @property
+    def translation_cost(self) -> float: ...
+    @property
+    def rotation_cost(self) -> float: ...
+    @property
+    def translation_step(self) -> float: ...  # voxels
+    @property
+    def rotation_gradient(self) -> float: ...
+    @property
+    def correlation(self) -> float: ...
+    @property
+    def translation_peak(self) -> float: ...
+    @property
+    def T_scene_model(self) -> _Array: ...  # (4, 4)
+
+class AlignResult:
+    """Outcome of align()."""
+
+    @property
+    def T_scene_model(self) -> _Array: ...  # (4, 4)
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def fitness(self) -> float: ...
+    @property
+    def correlation(self) -> float: ...
+    @property
+    def translation_peak(self) -> float: ...
+    @property
+    def hypothesis(self) -> int: ...
+    @property
+    def search_voxel_size(self) -> float: ...  # metres
+    @property
+    def window_dims(self) -> _IntArray: ...  # (3,)
+    @property
+    def history(self) -> list[AlignIteration]: ...
+
+def _align(model: PointCloud, scene: PointCloud, params: AlignParams) -> AlignResult: ...
+
+# --- Kinematics (bindings/kinematics.cpp) ------------------------------------
+
+class DampingParams:
+    """Damping of the least-squares pseudo-inverse."""
+
+    def __init__(
+        self, singular_value_threshold: float = 0.05, max_damping: float = 0.05
+    ) -> None: ...
+    singular_value_threshold: float
+    max_damping: float
+
+class DampedSolution:
+    """x = J^+ b with the damping that was used."""
+
+    @property
+    def x(self) -> _Array: ...
+    @property
+    def damping(self) -> float: ...
+    @property
+    def min_singular_value(self) -> float: ...
+
+def damped_least_squares(
+    J: npt.ArrayLike, b: npt.ArrayLike, params: DampingParams = ...
+) -> DampedSolution: ...
+
+class VelocityCommandParams:
+    """Settings of Kinematics.joint_velocities."""
+
+    def __init__(
+        self,
+        dt: float = 0.05,  # s
+        position_margin: float = 0.01,  # rad (m)
+        max_joint_speed: float = ...,  # rad/s (m/s); infinite by default
+        damping: DampingParams = ...,
+    ) -> None: ...
+    dt: float
+    position_margin: float
+    max_joint_speed: float
+    damping: DampingParams
+
+class VelocityCommand:
+    """A joint velocity command and how the limits shaped it."""
+
+    @property
+    def q_dot(self) -> _Array: ...  # (n,), rad/s (m/s)
+    @property
+    def damping(self) -> float: ...
+    @property
+    def min_singular_value(self) -> float: ...
+    @property
+    def velocity_scale(self) -> float: ...
+    @property
+    def position_limited(self) -> list[int]: ...
+
+class Kinematics:
+    """A serial chain of a URDF with a camera rigidly mounted on its tip link."""
+
+    def __init__(
+        self,
+        urdf_path: _Path,
+        base_link: str,
+        tip_link: str,
+        T_tip_camera: npt.ArrayLike | None = None,  # (4, 4), identity by default
+    ) -> None: ...
+    @staticmethod
+    def from_urdf_string(
+        urdf_xml: str, base_link: str, tip_link: str, T_tip_camera: npt.ArrayLike | None = None
+    ) -> Kinematics: ...
+    @property
+    def joint_count(self) -> int: ...
+    @property
+    def joint_names(self) -> list[str]: ...
+    @property
+    def lower_limits(self) -> _Array: ...  # (n,)
+    @property
+    def upper_limits(self) -> _Array: ...  # (n,)
+    @property
+    def velocity_limits(self) -> _Array: ...  # (n,)
+    @property
+    def base_link(self) -> str: ...
+    @property
+    def tip_link(self) -> str: ...
+    @property
+    def T_tip_camera(self) -> _Array: ...  # (4, 4)
+    def tip_pose(self, q: npt.ArrayLike) -> _Array: ...  # (4, 4) T_base_tip
+    def forward(self, q: npt.ArrayLike) -> _Array: ...  # (4, 4) T_base_camera
+    def jacobian(self, q: npt.ArrayLike) -> _Array: ...  # (6, n)
+    def joint_velocities(
+        self,
+        q: npt.ArrayLike,  # (n,)
+        camera_twist: npt.ArrayLike,  # (6,): v (m/s), omega (rad/s), camera frame
+        params: VelocityCommandParams = ...,
+    ) -> VelocityCommand: ...

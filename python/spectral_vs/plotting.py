@@ -1,0 +1,406 @@
+"""Figures of an alignment written to image files: its convergence (the paper's Fig. 3 and 5)
+and the model's path onto the scene (Fig. 1).
+
+matplotlib is optional (``pip install spectral_vs[plot]``) and imported only when a figure
+is drawn. Figures are made without ``pyplot`` on the Agg canvas, so drawing works without a
+display and leaves the caller's matplotlib backend alone.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from spectral_vs._core import AlignParams, AlignResult, PointCloud
+
+_SCENE_COLOR = "0.45"
+_INITIAL_COLOR = "tab:red"
+_STEP_COLOR = "tab:orange"
+_FINAL_COLOR = "tab:green"
+_PATH_COLOR = "black"
+
+
+def _new_figure(width: float, height: float) -> Any:
+    """A matplotlib ``Figure`` on the Agg canvas, with a clear message if matplotlib is missing."""
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as error:
+        raise ImportError(
+            "spectral_vs.plotting needs matplotlib: pip install spectral_vs[plot]"
+        ) from error
+    figure = Figure(figsize=(width, height), dpi=110, layout="constrained")
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def pose_errors(
+    T_estimate: np.ndarray, T_true: np.ndarray, center: np.ndarray | None = None
+) -> tuple[float, float]:
+    """Rotation and translation error of an estimated pose against the true one.
+
+    Parameters
+    ----------
+    T_estimate, T_true : ndarray (4, 4)
+        Estimated and true ``T_scene_model``.
+    center : ndarray (3,), optional
+        Point of the model, in model coordinates, at which the translation error is
+        measured (e.g. the model's centroid); defaults to the model's origin, which gives
+        the distance between the two translation vectors.
+
+    Returns
+    -------
+    rotation_error : float
+        Angle of ``R_estimate^T R_true``, degrees.
+    translation_error : float
+        Distance between ``center`` moved by either transform, millimetres.
+    """
+    T_estimate = np.asarray(T_estimate, dtype=float)
+    T_true = np.asarray(T_true, dtype=float)
+    cosine = (np.trace(T_estimate[:3, :3].T @ T_true[:3, :3]) - 1.0) / 2.0
+    rotation_error = float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
+    point = np.zeros(3) if center is None else np.asarray(center, dtype=float)
+    offset = T_estimate[:3, :3] @ point + T_estimate[:3, 3] - T_true[:3, :3] @ point - T_true[:3, 3]
+    return rotation_error, float(1000.0 * np.linalg.norm(offset))
+
+
+def _set_scale(axis: Any, values: np.ndarray, from_zero: bool = False) -> None:
+    """Log scale for positive values spanning more than a decade, else linear.
+
+    A linear axis spans at least 1% of the values' size (or starts at zero with
+    ``from_zero``), so that a nearly constant series reads as constant instead of being
+    stretched over an offset axis.
+    """
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return
+    low, high = float(finite.min()), float(finite.max())
+    if low > 0 and high > 10 * low:
+        axis.set_yscale("log")
+    elif from_zero and low >= 0:
+        axis.set_ylim(0.0, 1.1 * high if high > 0 else 1.0)
+    else:
+        pad = max(0.08 * (high - low), 0.005 * max(abs(low), abs(high)), 1e-12)
+        axis.set_ylim(low - pad, high + pad)
+    if axis.get_yscale() == "linear":
+        axis.ticklabel_format(axis="y", useOffset=False)
+
+
+def plot_convergence(
+    result: AlignResult,
+    path: str | os.PathLike[str],
+    title: str | None = None,
+    *,
+    tolerance: float | None = None,
+    voxel_size: float | None = None,
+    ground_truth: np.ndarray | None = None,
+    center: np.ndarray | None = None,
+    initial_T: np.ndarray | None = None,
+) -> None:
+    """Plot the per-iteration costs and gradients of an alignment (the paper's Fig. 3 and 5).
+
+    Four panels over the iterations of Algorithm 1: the translation cost J_t (eq. 9), the
+    rotation cost J_r (eq. 16), the two terms of the stop rule (eq. 17) with the tolerance
+    eps_g, and either the pose error against ``ground_truth`` or, without it, the EGI
+    correlation and the phase-correlation peak.
+
+    Parameters
+    ----------
+    result : AlignResult
+        Output of :func:`spectral_vs.align`; its ``history`` is plotted.
+    path : str or PathLike
+        Image file to write; the format follows the extension (``.png``, ``.pdf``, ``.svg``).
+    title : str, optional
+        Title above the panels.
+    tolerance : float, optional
+        eps_g of eq. (17) used in the run; defaults to ``AlignParams().tolerance``.
+    voxel_size : float, optional
+        Voxel edge of the run, metres, to label the translation step also in millimetres.
+    ground_truth : ndarray (4, 4), optional
+        True ``T_scene_model``; adds the rotation error (degrees) and translation error
+        (millimetres) of every iteration.
+    center : ndarray (3,), optional
+        Model point at which the translation error is measured (see :func:`pose_errors`).
+    initial_T : ndarray (4, 4), optional
+        ``T_scene_model`` the model started from (identity when omitted); its error is
+        drawn at iteration 0, before the global search and the first update.
+    """
+    history = list(result.history)
+    eps_g = AlignParams().tolerance if tolerance is None else tolerance
+    iterations = np.arange(1, len(history) + 1)
+    figure = _new_figure(10.0, 7.0)
+    (cost_t, cost_r), (stop, last) = figure.subplots(2, 2, sharex=True)
+    if title:
+        figure.suptitle(title)
+    if not history:
+        figure.text(0.5, 0.5, "no iterations recorded", ha="center", va="center")
+        figure.savefig(path)
+        return
+
+    def series(name: str) -> np.ndarray:
+        return np.array([getattr(step, name) for step in history], dtype=float)
+
+    j_t = series("translation_cost")
+    cost_t.plot(iterations, j_t, "o-", color="tab:blue", markersize=3)
+    _set_scale(cost_t, j_t)
+    cost_t.set_title("translation cost $J_t$ (eq. 9)")
+    cost_t.set_ylabel("$J_t$ (voxel grid units)")
+
+    j_r = series("rotation_cost")
+    cost_r.plot(iterations, j_r, "o-", color="tab:purple", markersize=3)
+    _set_scale(cost_r, j_r)
+    cost_r.set_title("rotation cost $J_r$ (eq. 16)")
+    cost_r.set_ylabel("$J_r$ (normalised EGI units)")
+
+    step = series("translation_step")
+    gradient = series("rotation_gradient")
+    step_label = "translation step (voxels)"
+    if voxel_size:
+        step_label = f"translation step (voxels of {1000 * voxel_size:g} mm)"
+    stop.plot(iterations, step, "o-", color="tab:blue", markersize=3, label=step_label)
+    stop.plot(
+        iterations,
+        gradient,
+        "s-",
+        color="tab:purple",
+        markersize=3,
+        label=r"$|\nabla C_r|$ (per radian)",
+    )
+    stop.plot(iterations, step + gradient, "-", color="black", linewidth=1.5, label="sum (eq. 17)")
+    stop.axhline(
+        eps_g, color="tab:red", linestyle="--", label=rf"tolerance $\epsilon_g$ = {eps_g:g}"
+    )
+    _set_scale(stop, np.concatenate([step, gradient, [eps_g]]))
+    stop.set_title("stop rule: gradient norms")
+    stop.set_xlabel("iteration")
+    stop.set_ylabel("norm")
+    stop.legend(fontsize="small", loc="best")
+
+    if ground_truth is not None:
+        start = np.eye(4) if initial_T is None else np.asarray(initial_T, dtype=float)
+        poses = [start] + [np.asarray(s.T_scene_model) for s in history]
+        errors = np.array([pose_errors(T, ground_truth, center) for T in poses], dtype=float)
+        steps = np.arange(len(poses))
+        rotation_line = last.plot(
+            steps, errors[:, 0], "o-", color="tab:purple", markersize=4, label="rotation (left)"
+        )
+        last.set_ylabel("rotation error (degrees)", color="tab:purple")
+        right = last.twinx()
+        translation_line = right.plot(
+            steps, errors[:, 1], "s--", color="tab:blue", markersize=3, label="translation (right)"
+        )
+        last.legend(handles=rotation_line + translation_line, fontsize="small")
+        right.set_ylabel("translation error (mm)", color="tab:blue")
+        _set_scale(last, errors[:, 0], from_zero=True)
+        _set_scale(right, errors[:, 1], from_zero=True)
+        last.set_title("error against the ground truth (0 = start)")
+    else:
+        last.plot(
+            iterations,
+            series("correlation"),
+            "o-",
+            color="tab:purple",
+            markersize=3,
+            label="EGI correlation $C_r$",
+        )
+        last.plot(
+            iterations,
+            series("translation_peak"),
+            "s-",
+            color="tab:blue",
+            markersize=3,
+            label="phase-correlation peak",
+        )
+        last.set_ylim(min(0.0, float(series("correlation").min())) - 0.05, 1.05)
+        last.set_ylabel("dimensionless")
+        last.set_title("similarity")
+        last.legend(fontsize="small")
+    last.set_xlabel("iteration")
+    first = 0 if ground_truth is not None else 1
+    for axis in (cost_t, cost_r, stop, last):
+        axis.grid(True, which="major", alpha=0.3)
+        axis.xaxis.get_major_locator().set_params(integer=True)
+        axis.set_xlim(first - 0.3, len(history) + 0.3)
+    figure.savefig(path)
+
+
+def _points(cloud: PointCloud | np.ndarray) -> np.ndarray:
+    if isinstance(cloud, PointCloud):
+        return np.asarray(cloud.points)
+    return np.asarray(cloud, dtype=float)[:, :3]
+
+
+def _moved(points: np.ndarray, T: np.ndarray) -> np.ndarray:
+    T = np.asarray(T, dtype=float)
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def _subsample(points: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    if len(points) <= count:
+        return points
+    return points[rng.choice(len(points), size=count, replace=False)]
+
+
+def _view_box(clouds: list[np.ndarray], size: float) -> tuple[np.ndarray, float]:
+    """Centre and half edge of a cube holding ``clouds`` with a margin of 0.6 ``size``."""
+    stacked = np.vstack(clouds)
+    low, high = stacked.min(axis=0) - 0.6 * size, stacked.max(axis=0) + 0.6 * size
+    return (low + high) / 2, float(np.max(high - low)) / 2
+
+
+def _display_frame(
+    points: np.ndarray, normals: np.ndarray | None
+) -> tuple[np.ndarray, list[str], str]:
+    """A rotation whose third row, "up", is the normal of the scene's main plane.
+
+    The normal is the direction of least spread of ``points``, turned toward where most
+    ``normals`` point (toward the sensor above a table). Within 10 degrees of a coordinate
+    axis it snaps to that axis, so the axes keep their names (e.g. ``-y`` for a scan in
+    camera coordinates, y pointing down); otherwise the frame is tilted and its axes are
+    named x', y' and up. Returns the rows (display axes in scene coordinates), the axis
+    labels and the name of the up direction.
+    """
+    if len(points) < 4:
+        return np.eye(3), ["x (m)", "y (m)", "z (m)"], "+z"
+    centred = points - points.mean(axis=0)
+    up = np.linalg.eigh(centred.T @ centred)[1][:, 0]
+    if normals is not None and len(normals):
+        up = up if float(np.mean(normals @ up)) >= 0 else -up
+    else:
+        up = up if up[np.argmax(np.abs(up))] >= 0 else -up
+    names = "xyz"
+    k = int(np.argmax(np.abs(up)))
+    if abs(up[k]) > np.cos(np.radians(10.0)):
+        first, second = (k + 1) % 3, (k + 2) % 3  # e_first x e_second = e_k
+        unit = np.eye(3)
+        if up[k] > 0:
+            rows = np.array([unit[first], unit[second], unit[k]])
+            return rows, [f"{names[i]} (m)" for i in (first, second, k)], f"+{names[k]}"
+        rows = np.array([unit[second], unit[first], -unit[k]])
+        labels = [f"{names[second]} (m)", f"{names[first]} (m)", f"-{names[k]} (m)"]
+        return rows, labels, f"-{names[k]}"
+    across = np.eye(3)[int(np.argmin(np.abs(up)))]
+    across = across - (across @ up) * up
+    across /= np.linalg.norm(across)
+    rows = np.array([across, np.cross(up, across), up])
+    return rows, ["x' (m)", "y' (m)", "up (m)"], "the main plane's normal"
+
+
+def render_alignment(
+    model: PointCloud | np.ndarray,
+    scene: PointCloud | np.ndarray,
+    result: AlignResult,
+    path: str | os.PathLike[str],
+    initial_T: np.ndarray | None = None,
+    *,
+    title: str | None = None,
+    max_points: int = 3000,
+    steps: int = 4,
+) -> None:
+    """Draw the model moving onto the scene (the paper's Fig. 1), without a display.
+
+    Two panels: a 3D view and a top view, both of the region around the model's poses
+    with equal scaling on all axes. "Up" is the normal of the scene's main plane (a
+    table), so a scan in camera coordinates is shown upright. The scene is grey, the
+    model red at its initial pose, faint orange at a few intermediate iterations and
+    green at the final pose; a black line follows the model's centroid.
+
+    Parameters
+    ----------
+    model, scene : PointCloud or ndarray (N, 3)
+        The clouds given to :func:`spectral_vs.align`, in model and scene coordinates.
+        The scene's normals, if any, tell up from down.
+    result : AlignResult
+        Output of :func:`spectral_vs.align`.
+    path : str or PathLike
+        Image file to write; the format follows the extension.
+    initial_T : ndarray (4, 4), optional
+        ``T_scene_model`` the model starts from; identity when omitted (the model drawn
+        where its coordinates put it).
+    title : str, optional
+        Title above the panels.
+    max_points : int
+        At most this many model points are drawn per pose, twice as many scene points.
+    steps : int
+        Number of intermediate poses drawn from ``result.history``.
+    """
+    rng = np.random.default_rng(0)
+    model_points = _subsample(_points(model), max_points, rng)
+    scene_points = _points(scene)
+    start = np.eye(4) if initial_T is None else np.asarray(initial_T, dtype=float)
+    history = [np.asarray(step.T_scene_model) for step in result.history]
+    final = np.asarray(result.T_scene_model)
+    picks = np.unique(np.linspace(0, len(history) - 1, steps + 2).round().astype(int))[1:-1]
+    between = [history[i] for i in picks] if len(history) > 2 else []
+    centroid = model_points.mean(axis=0)
+    path_points = np.array([_moved(centroid[None], T)[0] for T in [start, *history, final]])
+    initial = _moved(model_points, start)
+    aligned = _moved(model_points, final)
+    size = float(np.max(np.ptp(model_points, axis=0)))
+
+    # Up from the scene around the model's first and last pose, then the view in that frame.
+    middle, half = _view_box([initial, aligned, path_points], size)
+    near = np.linalg.norm(scene_points - middle, axis=1) <= half
+    normals = None
+    if isinstance(scene, PointCloud) and scene.has_normals:
+        normals = np.asarray(scene.normals)[near]
+    rows, labels, up_name = _display_frame(scene_points[near], normals)
+
+    def display(points: np.ndarray) -> np.ndarray:
+        return points @ rows.T
+
+    middle, half = _view_box([display(initial), display(aligned), display(path_points)], size)
+    shown = display(scene_points)
+    shown = _subsample(shown[np.all(np.abs(shown - middle) <= half, axis=1)], 2 * max_points, rng)
+
+    figure = _new_figure(13.0, 6.2)
+    figure.get_layout_engine().set(w_pad=0.2)
+    view3d = figure.add_subplot(1, 2, 1, projection="3d")
+    view3d.computed_zorder = False  # draw in order: the model over the scene
+    view2d = figure.add_subplot(1, 2, 2)
+    if title:
+        figure.suptitle(title)
+
+    def draw(points: np.ndarray, **style: Any) -> None:
+        points = display(points)
+        view3d.scatter(points[:, 0], points[:, 1], points[:, 2], depthshade=False, **style)
+        view2d.scatter(points[:, 0], points[:, 1], **style)
+
+    view3d.scatter(
+        *shown.T,
+        s=1.5,
+        color=_SCENE_COLOR,
+        alpha=0.5,
+        depthshade=False,
+        label=f"scene ({len(scene_points)} points)",
+    )
+    view2d.scatter(shown[:, 0], shown[:, 1], s=1.5, color=_SCENE_COLOR, alpha=0.5)
+    draw(initial, s=2, color=_INITIAL_COLOR, alpha=0.8, label="model, initial pose")
+    for i, T in enumerate(between):
+        label = f"iterations {', '.join(str(p + 1) for p in picks)}" if i == 0 else None
+        draw(_moved(model_points, T), s=1, color=_STEP_COLOR, alpha=0.2, label=label)
+    draw(aligned, s=2, color=_FINAL_COLOR, alpha=0.6, label="model, final pose")
+    path_shown = display(path_points)
+    style = {"color": _PATH_COLOR, "markersize": 2.5, "linewidth": 1.2}
+    view3d.plot(*path_shown.T, "o-", label="path of the model centroid", **style)
+    view2d.plot(path_shown[:, 0], path_shown[:, 1], "o-", **style)
+
+    for i, axis in enumerate("xyz"):
+        getattr(view3d, f"set_{axis}lim")(middle[i] - half, middle[i] + half)
+        getattr(view3d, f"set_{axis}label")(labels[i])
+    view3d.set_box_aspect((1, 1, 1))
+    view3d.view_init(elev=25, azim=-60)
+    view3d.set_title(f"3D view, up = {up_name}")
+    view2d.set_xlim(middle[0] - half, middle[0] + half)
+    view2d.set_ylim(middle[1] - half, middle[1] + half)
+    view2d.set_aspect("equal")
+    view2d.set_xlabel(labels[0])
+    view2d.set_ylabel(labels[1])
+    view2d.set_title(f"top view, seen from {up_name}")
+    view2d.grid(True, alpha=0.3)
+    legend = view3d.legend(loc="upper left", fontsize="small", markerscale=4)
+    for handle in legend.legend_handles:
+        handle.set_alpha(1.0)
+    figure.savefig(path)

@@ -1,0 +1,327 @@
+"""The ``spectral-vs`` command line, run in-process on clouds written to files."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+from conftest import box_and_sphere
+
+import spectral_vs as svs
+from spectral_vs.cli import main
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def rotation(axis, angle_deg: float) -> np.ndarray:
+    """Rodrigues' formula, independent of the CLI's own helper."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    a = np.radians(angle_deg)
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory) -> dict:
+    """A box with a sphere beside it as MODEL (.pcd) and, resampled, rotated by 35 degrees,
+    shifted and noisy, as SCENE (.ply); the true T_scene_model as text and as .npy."""
+    folder = tmp_path_factory.mktemp("cli")
+    rng = np.random.default_rng(31)
+    points, normals = box_and_sphere(rng)
+    scene_points, scene_normals = box_and_sphere(rng)  # an independent sample
+    T = np.eye(4)
+    T[:3, :3] = rotation([0.3, -0.5, 1.0], 35.0)
+    T[:3, 3] = [0.05, -0.03, 0.02]
+    scene_points = scene_points @ T[:3, :3].T + T[:3, 3] + rng.normal(0, 0.001, scene_points.shape)
+    svs.save_cloud(folder / "model.pcd", svs.PointCloud(points, normals))
+    svs.save_cloud(folder / "scene.ply", svs.PointCloud(scene_points, scene_normals @ T[:3, :3].T))
+    np.savetxt(folder / "truth.txt", T)
+    np.save(folder / "truth.npy", T)
+    return {
+        "model": str(folder / "model.pcd"),
+        "scene": str(folder / "scene.ply"),
+        "truth_txt": str(folder / "truth.txt"),
+        "truth_npy": str(folder / "truth.npy"),
+        "T": T,
+        "points": points,
+    }
+
+
+def errors(T_estimate: np.ndarray, T_true: np.ndarray, center: np.ndarray) -> tuple[float, float]:
+    """Rotation error (degrees) and error at ``center`` (mm), computed here, not by the CLI."""
+    cos = (np.trace(T_estimate[:3, :3].T @ T_true[:3, :3]) - 1) / 2
+    offset = (T_estimate[:3, :3] - T_true[:3, :3]) @ center + T_estimate[:3, 3] - T_true[:3, 3]
+    return float(np.degrees(np.arccos(np.clip(cos, -1, 1)))), 1000 * float(np.linalg.norm(offset))
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_align_json_recovers_the_pose(case, capsys):
+    code, out, err = run(
+        capsys, "align", case["model"], case["scene"], "--ground-truth", case["truth_npy"], "--json"
+    )
+    report = json.loads(out)
+    assert code == 0
+    assert err == ""  # --json prints no progress
+    for key in (
+        "T_scene_model",
+        "converged",
+        "iterations",
+        "fitness",
+        "correlation",
+        "time_s",
+        "rotation_error_deg",
+        "translation_error_mm",
+        "passed",
+    ):
+        assert key in report
+    assert report["converged"] is True
+    assert report["passed"] is True
+    assert report["iterations"] >= 1
+    assert report["fitness"] > 0.9
+    T = np.array(report["T_scene_model"])
+    rotation_error, translation_error = errors(T, case["T"], case["points"].mean(axis=0))
+    assert rotation_error < 2.0
+    assert translation_error < 3.0
+    # The CLI's own error report agrees with the errors computed here.
+    assert report["rotation_error_deg"] == pytest.approx(rotation_error, abs=1e-6)
+    assert report["translation_error_mm"] == pytest.approx(translation_error, abs=0.2)
+
+
+def test_align_text_output_and_progress(case, capsys):
+    code, out, err = run(
+        capsys, "align", case["model"], case["scene"], "--ground-truth", case["truth_txt"]
+    )
+    assert code == 0
+    assert "T_scene_model" in out
+    match = re.search(r"rotation ([\d.]+) deg, translation ([\d.]+) mm", out)
+    assert match, out
+    assert float(match.group(1)) < 2.0
+    assert float(match.group(2)) < 3.0
+    # Progress: one line per stage on stderr, each with its elapsed time.
+    lines = err.strip().splitlines()
+    assert lines[0].startswith("loading model model.pcd ... 6000 points")
+    assert any(line.startswith("aligning (8 mm voxels, global search") for line in lines)
+    assert all(re.search(r"\d+ (ms|s)$", line) for line in lines), err
+
+
+def test_align_quiet_prints_no_progress(case, capsys):
+    code, out, err = run(capsys, "align", case["model"], case["scene"], "--quiet")
+    assert code == 0
+    assert "converged after" in out
+    assert err == ""
+
+
+def test_align_writes_figures_and_the_aligned_model(case, capsys, tmp_path):
+    plot, render, aligned = tmp_path / "c.png", tmp_path / "figs" / "a.png", tmp_path / "m.ply"
+    code, _, _ = run(
+        capsys,
+        "align",
+        case["model"],
+        case["scene"],
+        "--quiet",
+        "--ground-truth",
+        case["truth_txt"],
+        "--plot",
+        str(plot),
+        "--render",
+        str(render),
+        "--save-aligned",
+        str(aligned),
+    )
+    assert code == 0
+    for png in (plot, render):
+        data = png.read_bytes()
+        assert data[:8] == PNG_MAGIC
+        assert len(data) > 10_000
+    # The saved cloud is MODEL moved onto the scene: within 3 mm of the truth, point by point.
+    moved = svs.load_cloud(aligned)
+    expected = case["points"] @ case["T"][:3, :3].T + case["T"][:3, 3]
+    assert len(moved) == len(expected)
+    distances = np.linalg.norm(np.asarray(moved.points) - expected, axis=1)
+    assert np.max(distances) < 0.003
+
+
+def test_paper_mode_from_an_initial_guess(case, capsys, tmp_path):
+    """Local refinement (no global search) from a guess 8 degrees and 15 mm off the truth."""
+    guess = case["T"].copy()
+    guess[:3, :3] = rotation([1.0, 0.2, -0.4], 8.0) @ guess[:3, :3]
+    guess[:3, 3] += [0.015, 0.0, 0.0]
+    np.savetxt(tmp_path / "guess.txt", guess)
+    code, out, _ = run(
+        capsys,
+        "align",
+        case["model"],
+        case["scene"],
+        "--paper",
+        "--quiet",
+        "--initial-guess",
+        str(tmp_path / "guess.txt"),
+        "--ground-truth",
+        case["truth_txt"],
+        "--json",
+    )
+    report = json.loads(out)
+    assert code == 0
+    assert report["rotation_error_deg"] < 2.0
+    assert report["translation_error_mm"] < 3.0
+
+
+def test_wrong_ground_truth_exits_1(case, capsys, tmp_path):
+    wrong = case["T"].copy()
+    wrong[:3, :3] = rotation([0.0, 0.0, 1.0], 20.0) @ wrong[:3, :3]
+    np.savetxt(tmp_path / "wrong.txt", wrong)
+    code, out, _ = run(
+        capsys,
+        "align",
+        case["model"],
+        case["scene"],
+        "--quiet",
+        "--json",
+        "--ground-truth",
+        str(tmp_path / "wrong.txt"),
+    )
+    report = json.loads(out)
+    assert code == 1
+    assert report["passed"] is False
+    assert report["rotation_error_deg"] == pytest.approx(20.0, abs=2.0)
+
+
+def test_not_converged_exits_1(case, capsys):
+    code, out, _ = run(
+        capsys, "align", case["model"], case["scene"], "--quiet", "--paper", "--max-iterations", "1"
+    )
+    assert code == 1
+    assert "NOT converged after 1 iteration," in out
+
+
+def test_missing_file_exits_2_and_names_it(case, capsys, tmp_path):
+    missing = tmp_path / "nowhere.pcd"
+    code, out, err = run(capsys, "align", case["model"], str(missing))
+    assert code == 2
+    assert out == ""
+    assert err.count("\n") == 1
+    assert err.startswith("error: SCENE:")
+    assert str(missing) in err
+    code, _, err = run(capsys, "align", str(missing), case["scene"], "--quiet")
+    assert code == 2
+    assert err.startswith("error: MODEL:") and str(missing) in err
+
+
+@pytest.mark.parametrize("name", ["notes.pcd", "notes.ply", "notes.txt"])
+def test_not_a_point_cloud_exits_2(case, capsys, tmp_path, name):
+    path = tmp_path / name
+    path.write_text("these are not points\n")
+    code, _, err = run(capsys, "align", str(path), case["scene"], "--quiet")
+    assert code == 2
+    assert err.startswith("error: MODEL:")
+    assert str(path) in err
+    assert err.count("\n") == 1
+
+
+def test_bad_transform_file_exits_2(case, capsys, tmp_path):
+    (tmp_path / "t.txt").write_text("1 0 0\n0 1 0\n0 0 1\n")
+    code, _, err = run(
+        capsys,
+        "align",
+        case["model"],
+        case["scene"],
+        "--quiet",
+        "--ground-truth",
+        str(tmp_path / "t.txt"),
+    )
+    assert code == 2
+    assert err.startswith("error: --ground-truth:") and "4x4" in err
+    np.savetxt(tmp_path / "scaled.txt", np.diag([2.0, 1.0, 1.0, 1.0]))
+    code, _, err = run(
+        capsys,
+        "align",
+        case["model"],
+        case["scene"],
+        "--quiet",
+        "--initial-guess",
+        str(tmp_path / "scaled.txt"),
+    )
+    assert code == 2
+    assert err.startswith("error: --initial-guess:") and "not a rigid transform" in err
+
+
+def test_bad_output_extension_exits_2_before_aligning(case, capsys, tmp_path):
+    code, _, err = run(
+        capsys, "align", case["model"], case["scene"], "--save-aligned", str(tmp_path / "out.xyz")
+    )
+    assert code == 2
+    assert err.startswith("error: --save-aligned:")
+    assert "loading" not in err
+
+
+def test_bad_option_value_exits_2(case, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["align", case["model"], case["scene"], "--voxel-size", "-1"])
+    assert exit_info.value.code == 2
+    assert "argument --voxel-size: must be a finite number > 0" in capsys.readouterr().err
+
+
+def test_help_explains_the_transform(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["align", "--help"])
+    out = capsys.readouterr().out
+    assert exit_info.value.code == 0
+    assert "T_scene_model" in out
+    assert "metres" in out
+    assert "spectral-vs align" in out  # the example in the epilog
+
+
+def demo_errors(out: str) -> tuple[float, float]:
+    match = re.search(r"error: rotation ([\d.]+) deg, translation ([\d.]+) mm", out)
+    assert match, out
+    return float(match.group(1)), float(match.group(2))
+
+
+def test_demo_on_the_milk_carton_scan(data_dir, capsys, tmp_path):
+    code, out, _ = run(
+        capsys, "demo", "--data", str(data_dir), "--output", str(tmp_path), "--quiet", "--check"
+    )
+    assert "0 shared" in out
+    rotation_error, translation_error = demo_errors(out)
+    within = rotation_error <= 5.0 and translation_error <= 10.0
+    assert code == (0 if within else 1), out  # --check: the status tells success
+    for name in ("convergence.png", "alignment.png"):
+        data = (tmp_path / name).read_bytes()
+        assert data[:8] == PNG_MAGIC
+        assert len(data) > 10_000
+
+
+@pytest.mark.xfail(
+    reason="known limitation: in the full Kinect scene the global search settles on another "
+    "object (docs/experiments.md, real milk scene); strict, so a fix shows up here",
+)
+def test_demo_finds_the_milk_carton_in_its_scene(data_dir, capsys, tmp_path):
+    _, out, _ = run(capsys, "demo", "--data", str(data_dir), "--output", str(tmp_path), "--quiet")
+    rotation_error, translation_error = demo_errors(out)
+    assert rotation_error <= 5.0
+    assert translation_error <= 10.0
+
+
+def test_demo_without_scans_uses_a_generated_scene(capsys, tmp_path):
+    code, out, _ = run(
+        capsys, "demo", "--data", str(tmp_path / "no-scans"), "--output", str(tmp_path), "--quiet"
+    )
+    assert "using a generated scene" in out
+    assert code == 0  # the demo reports; only --check turns a miss into status 1
+    demo_errors(out)
+    for name in ("convergence.png", "alignment.png"):
+        assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
+
+
+def test_translation_demo(data_dir, capsys):
+    code, out, _ = run(capsys, "demo", "--translation-only", "--data", str(data_dir))
+    assert code == 0
+    match = re.search(r"error: ([\d.]+) mm", out)
+    assert match and float(match.group(1)) < 2.0
