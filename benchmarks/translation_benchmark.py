@@ -11,25 +11,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import subprocess
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-BEGIN = "<!-- translation-benchmark:begin -->"
-END = "<!-- translation-benchmark:end -->"
-
-
-def machine() -> str:
-    cpu = "unknown CPU"
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    return f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}"
+from report import BENCHMARKS_DOC, RESULTS, machine, replace_block
 
 
 def table(rows: list[dict]) -> str:
@@ -59,18 +44,12 @@ def main() -> None:
     )
     rows = json.loads(output.stdout)
     results = {"machine": machine(), "runs": args.runs, "cases": rows}
-    out_dir = ROOT / "benchmarks" / "results"
-    out_dir.mkdir(exist_ok=True)
-    (out_dir / "translation.json").write_text(json.dumps(results, indent=2) + "\n")
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "translation.json").write_text(json.dumps(results, indent=2) + "\n")
     text = table(rows)
     print(text)
-    docs = ROOT / "docs" / "benchmarks.md"
-    if docs.is_file() and BEGIN in docs.read_text():
-        body = docs.read_text()
-        head, rest = body.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        block = f"{BEGIN}\nMachine: {machine()}; median of {args.runs} runs.\n\n{text}\n{END}"
-        docs.write_text(head + block + tail)
+    block = f"Machine: {machine()}; median of {args.runs} runs.\n\n{text}"
+    replace_block(BENCHMARKS_DOC, "translation-benchmark", block)
 
 
 if __name__ == "__main__":

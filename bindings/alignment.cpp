@@ -41,7 +41,7 @@ initial_guess : ndarray (4, 4)
 global_search : bool
     Start from the best rotations of the SO(3) search (default True).
 hypotheses : int
-    Rotations of the global search that are refined and verified (default 16).
+    Rotations of the global search that are refined and verified (default 32).
 refinements : int
     The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
     scene around it; the best final fitness is kept (default 3, at most hypotheses).
@@ -51,6 +51,9 @@ search_voxel_size : float
 window_margin : float
     How far the model may move per window placement, metres; 0 (default): the larger of
     5 voxels and 2.5 search voxels.
+polish : bool
+    With global search: after Algorithm 1, a pattern search on the rotation (4 to 1/4
+    degree steps) for the highest phase-correlation peak (default True).
 subvoxel : bool
     Sub-voxel refinement of the phase-correlation peak.
 occupancy : str
@@ -83,6 +86,7 @@ max_voxels : int
       .def_readwrite("refinements", &AlignParams::refinements)
       .def_readwrite("search_voxel_size", &AlignParams::search_voxel_size)
       .def_readwrite("window_margin", &AlignParams::window_margin)
+      .def_readwrite("polish", &AlignParams::polish)
       .def_readwrite("subvoxel", &AlignParams::subvoxel)
       .def_property("occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
                     [](AlignParams& p, const std::string& s) {
@@ -110,6 +114,7 @@ max_voxels : int
       .def_readonly("rotation_gradient", &AlignIteration::rotation_gradient, "|grad C|, per radian.")
       .def_readonly("correlation", &AlignIteration::correlation, "Normalised EGI correlation.")
       .def_readonly("translation_peak", &AlignIteration::translation_peak, "Phase-correlation peak.")
+      .def_readonly("seconds", &AlignIteration::seconds, "Wall time of the iteration, seconds.")
       .def_property_readonly("T_scene_model", [](const AlignIteration& i) { return Eigen::Matrix4d(i.T_scene_model); });
 
   py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
@@ -124,6 +129,8 @@ max_voxels : int
       .def_readonly("hypothesis", &AlignResult::hypothesis)
       .def_readonly("search_voxel_size", &AlignResult::search_voxel_size,
                     "Voxel of the global search's translation grid, metres (0 without it).")
+      .def_readonly("polish_evaluations", &AlignResult::polish_evaluations,
+                    "Phase correlations of the final polish (0 without).")
       .def_property_readonly("window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
                              "Voxels of the window Algorithm 1 ran in, per axis.")
       .def_readonly("history", &AlignResult::history)

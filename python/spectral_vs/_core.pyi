@@ -302,6 +302,7 @@ class AlignParams:
     refinements: int
     search_voxel_size: float  # metres, 0: automatic
     window_margin: float  # metres, 0: automatic
+    polish: bool
     subvoxel: bool
     occupancy: str  # "trilinear", "binary" or "count"
     egi_method: str  # "projection" or "histogram"
@@ -323,6 +324,8 @@ class AlignIteration:
     def correlation(self) -> float: ...
     @property
     def translation_peak(self) -> float: ...
+    @property
+    def seconds(self) -> float: ...
     @property
     def T_scene_model(self) -> _Array: ...  # (4, 4)
 
@@ -347,6 +350,8 @@ class AlignResult:
     def search_voxel_size(self) -> float: ...  # metres
     @property
     def window_dims(self) -> _IntArray: ...  # (3,)
+    @property
+    def polish_evaluations(self) -> int: ...
     @property
     def history(self) -> list[AlignIteration]: ...
 

@@ -184,6 +184,23 @@ TEST(PhaseCorrelation, EstimatesInSequenceMatchFreshObjects) {
   }
 }
 
+TEST(PhaseCorrelation, MaxShiftBoundsTheSearch) {
+  std::mt19937 rng(17);
+  const PointCloud shape = test::box_and_sphere(3000, rng);
+  const PointCloud moved = shape.transformed(test::translation({0.056, 0.0, 0.0}));  // 7 voxels
+  const GridSpec spec = make_grid_spec(bounding_box(shape), bounding_box(moved), 0.008);
+  PhaseCorrelation correlation(spec);
+  correlation.set_target(voxelize(moved, spec));
+  const VoxelGrid moving = voxelize(shape, spec);
+  const auto free = correlation.estimate(moving);
+  const auto wide = correlation.estimate(moving, Eigen::Vector3i::Constant(10));
+  const auto bounded = correlation.estimate(moving, Eigen::Vector3i::Constant(3));
+  EXPECT_NEAR(free.shift.x(), 0.056, 0.0015);  // metres
+  EXPECT_EQ(wide.shift_voxels, free.shift_voxels);
+  EXPECT_LE(bounded.peak_voxels.cwiseAbs().maxCoeff(), 3);
+  EXPECT_THROW(correlation.estimate(moving, Eigen::Vector3i(-1, 0, 0)), std::invalid_argument);
+}
+
 TEST(TranslationCost, EqualsHalfTheSymmetricDifferenceOfBinaryGrids) {
   GridSpec spec;
   spec.resolution = 0.01;

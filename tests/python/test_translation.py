@@ -81,3 +81,19 @@ def test_phase_correlation_errors():
         svs.phase_correlation(np.ones((4, 4, 4)), np.ones((4, 4, 4)), subvoxel_band=2.0)
     with pytest.raises(ValueError, match="has non-finite values"):
         svs.phase_correlation(np.full((4, 4, 4), np.nan), np.ones((4, 4, 4)))
+
+
+def test_max_shift_bounds_the_search():
+    spec = svs.GridSpec(origin=(0.0, 0.0, 0.0), resolution=0.01, dims=(32, 32, 32))
+    rng = np.random.default_rng(5)
+    points = rng.uniform(0.05, 0.12, size=(400, 3))
+    moved = points + np.array([0.06, 0.0, 0.0])  # six voxels along x
+    correlation = svs.PhaseCorrelation(spec)
+    correlation.set_target(svs.voxelize(svs.PointCloud(moved), spec))
+    moving = svs.voxelize(svs.PointCloud(points), spec)
+    free = correlation.estimate(moving)
+    bounded = correlation.estimate(moving, max_shift=(3, 3, 3))
+    wide = correlation.estimate(moving, max_shift=(8, 8, 8))
+    assert np.allclose(free.shift_voxels, [6, 0, 0], atol=0.5)
+    assert np.all(np.abs(bounded.peak_voxels) <= 3)
+    np.testing.assert_array_equal(wide.shift_voxels, free.shift_voxels)

@@ -3,6 +3,7 @@
 #include "common/checks.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace spectral_vs::detail {
@@ -26,6 +27,48 @@ void voxelize_subset(const PointCloud& cloud, const std::vector<Eigen::Index>& r
 
 }  // namespace
 
+namespace {
+
+// The 26 directions to the neighbours of a voxel, about 35-45 degrees apart.
+const std::array<Eigen::Vector3d, 26>& directions() {
+  static const std::array<Eigen::Vector3d, 26> table = [] {
+    std::array<Eigen::Vector3d, 26> d;
+    int n = 0;
+    for (int x = -1; x <= 1; ++x)
+      for (int y = -1; y <= 1; ++y)
+        for (int z = -1; z <= 1; ++z) {
+          if (x || y || z) d[n++] = Eigen::Vector3d(x, y, z).normalized();
+        }
+    return d;
+  }();
+  return table;
+}
+
+int nearest_direction(const Eigen::Vector3d& normal) {
+  int best = 0;
+  double best_dot = -2.0;
+  for (int i = 0; i < 26; ++i) {
+    const double dot = directions()[i].dot(normal);
+    if (dot > best_dot) {
+      best_dot = dot;
+      best = i;
+    }
+  }
+  return best;
+}
+
+// The directions within 50 degrees of `normal`: with the 35-45 degree spacing of the
+// table, a model normal within about 30 degrees always finds its nearest direction set.
+std::uint32_t direction_mask(const Eigen::Vector3d& normal) {
+  std::uint32_t mask = 0;
+  for (int i = 0; i < 26; ++i) {
+    if (directions()[i].dot(normal) > 0.6428) mask |= 1u << i;
+  }
+  return mask | (1u << nearest_direction(normal));
+}
+
+}  // namespace
+
 SceneMap::SceneMap(const PointCloud& scene, double voxel_size, const GridLimits& limits) : scene_(&scene) {
   const Eigen::AlignedBox3d box = bounding_box(scene);
   spec_.resolution = voxel_size;
@@ -40,29 +83,36 @@ SceneMap::SceneMap(const PointCloud& scene, double voxel_size, const GridLimits&
   near_.assign(spec_.voxel_count(), 0);
   for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
     const Eigen::Vector3i v = spec_.index_of(scene.points().row(i).transpose());
+    const std::uint32_t mask = direction_mask(scene.normals().row(i).transpose());
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] = 1;
+        for (int dz = -1; dz <= 1; ++dz) near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] |= mask;
   }
 }
 
-double SceneMap::fitness(const Points& points) const {
-  // Distinct voxels of the model, as 21-bit-per-axis keys (inside the map or not).
+double SceneMap::fitness(const Points& points, const Points& normals) const {
+  // (voxel, direction) of every model point; voxels as 21-bit-per-axis keys, so that
+  // points outside the map count too (as unsupported).
   seen_.clear();
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     const Eigen::Vector3i v = spec_.index_of(points.row(i).transpose());
-    const Eigen::Array3i clamped = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
-    seen_.push_back((std::uint64_t(clamped.x()) << 42) | (std::uint64_t(clamped.y()) << 21) | std::uint64_t(clamped.z()));
+    const Eigen::Array3i c = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
+    const std::uint64_t key = (std::uint64_t(c.x()) << 42) | (std::uint64_t(c.y()) << 21) | std::uint64_t(c.z());
+    seen_.emplace_back(key, nearest_direction(normals.row(i).transpose()));
   }
   std::sort(seen_.begin(), seen_.end());
-  seen_.erase(std::unique(seen_.begin(), seen_.end()), seen_.end());
-  std::size_t supported = 0;
-  for (const std::uint64_t key : seen_) {
+  std::size_t voxels = 0, supported = 0;
+  for (std::size_t i = 0; i < seen_.size();) {
+    const std::uint64_t key = seen_[i].first;
     const Eigen::Vector3i v(int(key >> 42) - (1 << 20), int((key >> 21) & 0x1FFFFF) - (1 << 20),
                             int(key & 0x1FFFFF) - (1 << 20));
-    supported += spec_.contains(v) && near_[linear(spec_, v)];
+    const std::uint32_t mask = spec_.contains(v) ? near_[linear(spec_, v)] : 0u;
+    bool support = false;
+    for (; i < seen_.size() && seen_[i].first == key; ++i) support |= (mask >> seen_[i].second) & 1u;
+    ++voxels;
+    supported += support;
   }
-  return seen_.empty() ? 0.0 : double(supported) / double(seen_.size());
+  return voxels ? double(supported) / double(voxels) : 0.0;
 }
 
 std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) const {

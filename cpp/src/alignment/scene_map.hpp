@@ -12,8 +12,9 @@
 
 namespace spectral_vs::detail {
 
-/// Which voxels of the scene's box lie within one voxel of a scene point, for the
-/// fitness of a pose; and the scene points near a place, for windows.
+/// For each voxel of the scene's box, the directions of the normals of the scene points
+/// within one voxel of it (a mask over 26 directions), for the fitness of a pose; and
+/// the scene points near a place, for windows.
 class SceneMap {
 public:
   /// @throws std::invalid_argument if the map at `voxel_size` exceeds `limits`.
@@ -21,8 +22,10 @@ public:
 
   const PointCloud& cloud() const { return *scene_; }
 
-  /// Fraction of the occupied voxels of `points` that are next to scene points, in [0, 1].
-  double fitness(const Points& points) const;
+  /// Fraction of the occupied voxels of `points` that lie within one voxel of a scene
+  /// point whose normal is within about 50 degrees of theirs, in [0, 1]. The normals
+  /// keep a model lying flat on a table, or turned inside out, from scoring as a fit.
+  double fitness(const Points& points, const Points& normals) const;
 
   /// Indices of the scene points inside the axis-aligned box.
   std::vector<Eigen::Index> points_in(const Eigen::AlignedBox3d& box) const;
@@ -30,8 +33,8 @@ public:
 private:
   const PointCloud* scene_;
   GridSpec spec_;
-  std::vector<std::uint8_t> near_;
-  mutable std::vector<std::uint64_t> seen_;  // scratch of fitness: voxel keys of the model
+  std::vector<std::uint32_t> near_;  // per voxel: directions of nearby scene normals
+  mutable std::vector<std::pair<std::uint64_t, int>> seen_;  // scratch: (voxel key, direction)
 };
 
 /// A cubic window of the scene around the model, on a grid only as large as the window:

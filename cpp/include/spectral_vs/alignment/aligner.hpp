@@ -36,7 +36,7 @@ struct AlignParams {
   Transform initial_guess = Transform::Identity();  ///< T_scene_model to start from.
   bool global_search = true;   ///< Start from the best rotations of the SO(3) search
                                ///< (beyond the paper) instead of the initial guess's.
-  int hypotheses = 16;         ///< Rotations of the global search that are refined and verified:
+  int hypotheses = 32;         ///< Rotations of the global search that are refined and verified:
                                ///< enough to hold the true one among the near-equal maxima of
                                ///< an object with symmetric faces.
   int refinements = 3;         ///< The best-verified hypotheses that Algorithm 1 then runs from,
@@ -48,6 +48,9 @@ struct AlignParams {
   double window_margin = 0.0;  ///< How far the model may move per window placement, metres:
                                ///< local windows are the model's reach plus this on each side.
                                ///< 0: the larger of 5 voxels and 2.5 search voxels.
+  bool polish = true;          ///< With global search: after Algorithm 1, a pattern search on
+                               ///< the rotation (4 to 1/4 degree steps) for the highest
+                               ///< phase-correlation peak, past the EGI's accuracy floor.
   bool subvoxel = true;        ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;  ///< Voxel values (the paper: binary).
   EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
@@ -64,6 +67,7 @@ struct AlignIteration {
   double correlation = 0.0;        ///< Normalised EGI correlation C(R) in [-1, 1].
   double translation_peak = 0.0;   ///< Phase-correlation peak height in [0, 1].
   Transform T_scene_model = Transform::Identity();  ///< Pose after the update.
+  double seconds = 0.0;  ///< Wall time of the iteration (rotation and translation steps), s.
 };
 
 /// Outcome of `align`.
@@ -71,9 +75,10 @@ struct AlignResult {
   Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
   bool converged = false;      ///< The stop rule (eq. 17) held before max_iterations.
   int iterations = 0;          ///< Iterations of Algorithm 1 in the kept run.
-  /// Fraction of the model's occupied voxels that fall on occupied scene voxels (within
-  /// one voxel) at the final pose, in [0, 1]: high for a correct alignment, low for a
-  /// wrong one. A single-view scan of an object shows about half of a full model.
+  /// Fraction of the model's occupied voxels that lie within one voxel of scene points
+  /// with a normal within about 50 degrees of the model's, at the final pose, in [0, 1]:
+  /// high for a correct alignment, low for a wrong one. A single-view scan of an object
+  /// shows about half of a full model.
   double fitness = 0.0;
   double correlation = 0.0;       ///< Final normalised EGI correlation C(R).
   double translation_peak = 0.0;  ///< Final phase-correlation peak height.
@@ -82,6 +87,7 @@ struct AlignResult {
   /// grid (0 without global search) and the windows of Algorithm 1.
   double search_voxel_size = 0.0;
   Eigen::Vector3i window_dims = Eigen::Vector3i::Zero();  ///< Voxels of the local window.
+  int polish_evaluations = 0;  ///< Phase correlations of the final polish (0 without).
   std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
 };
 
