@@ -273,17 +273,17 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
 
 // Beyond the paper: with noisy normals the EGI correlation peaks about a degree from the
 // truth, and it cannot see small asymmetric parts (a mug's handle). The 3D voxel
-// correlation sees the whole shape: the rotation is polished for the highest
-// phase-correlation peak in the window, the translation re-placed at each trial. Per
+// correlation sees the whole shape: the rotation is polished for the best overlap of the
+// model's voxels with the window's, the translation re-placed by phase correlation at
+// each trial. Per
 // step size (4 down to 1/4 degree), trials at +-step about each model axis give a
 // parabola per axis, whose vertex is tried as one combined step; the best trial wins.
 Pose polish(const Problem& problem, TranslationWindow& window, Pose pose, int& evaluations) {
   window.follow(problem.model.centre(pose));
   const auto place = [&](Pose& trial) {
-    const TranslationEstimate shift = window.estimate(problem.model.move(trial));
-    trial.offset += shift.shift;
+    trial.offset += window.estimate(problem.model.move(trial)).shift;
     ++evaluations;
-    return shift.peak;
+    return window.overlap(problem.model.move(trial));
   };
   double best = place(pose);
   int rounds_at_first_step = 0;

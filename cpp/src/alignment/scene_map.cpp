@@ -181,6 +181,22 @@ double TranslationWindow::translation_cost() const {
   return spectral_vs::translation_cost(moving_, target_, Eigen::Vector3i::Zero(), target_energy_);
 }
 
+double TranslationWindow::overlap(const Points& moved) {
+  voxelize_into(moved, spec_, occupancy_, moving_, limits_);
+  if (target_.empty() || moving_.empty()) return 0.0;
+  double cross = 0.0, energy = 0.0;
+  const Eigen::Vector3i& lo = moving_.occupied_min;
+  const Eigen::Vector3i& hi = moving_.occupied_max;
+  for (int i = lo.x(); i <= hi.x(); ++i)
+    for (int j = lo.y(); j <= hi.y(); ++j)
+      for (int k = lo.z(); k <= hi.z(); ++k) {
+        const double m = moving_.at(i, j, k);
+        energy += m * m;
+        cross += m * target_.at(i, j, k);
+      }
+  return energy > 0.0 ? cross / std::sqrt(energy * target_energy_) : 0.0;
+}
+
 namespace {
 
 GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,

@@ -55,6 +55,9 @@ public:
   /// The shift of `moved` (model points in the scene) onto the scene, and J_t.
   TranslationEstimate estimate(const Points& moved);
   double translation_cost() const;
+  /// Normalised correlation of `moved`'s grid with the scene's at zero shift, in [0, 1]:
+  /// smooth in sub-voxel motions, with trilinear voxels.
+  double overlap(const Points& moved);
 
   const Eigen::Vector3d& centre() const { return centre_; }
   double half_width() const { return half_width_; }

@@ -109,7 +109,12 @@ struct PhaseCorrelation::Impl {
   // buffer less to stream through memory on each estimate).
   FftwBuffer<Complex> spectrum;
   FftwBuffer<Complex> target_spectrum;
-  fftwf_plan forward = nullptr;
+  // The forward transform in three passes, pruned to the moving grid's occupied box:
+  // along z for the x-slabs of the box, along y in those slabs, along x for all. Slabs
+  // outside the box are zero in `partial` and skipped by the first two passes.
+  FftwBuffer<Complex> partial;
+  fftwf_plan z_slab = nullptr, y_slab = nullptr, x_all = nullptr;
+  int partial_x0 = 0, partial_x1 = -1;  // slabs of `partial` that may be non-zero
   fftwf_plan inverse = nullptr;
   bool has_target = false;
   Eigen::Vector3i target_min, target_max;
@@ -120,8 +125,9 @@ struct PhaseCorrelation::Impl {
 
   ~Impl() {
     std::lock_guard<std::mutex> lock(planner_mutex());
-    if (forward) fftwf_destroy_plan(forward);
-    if (inverse) fftwf_destroy_plan(inverse);
+    for (fftwf_plan plan : {z_slab, y_slab, x_all, inverse}) {
+      if (plan) fftwf_destroy_plan(plan);
+    }
   }
 
   void make_plans() {
@@ -133,17 +139,29 @@ struct PhaseCorrelation::Impl {
     std::fill(input.get(), input.get() + real_count, 0.0f);
     spectrum = allocate<Complex>(complex_count);
     target_spectrum = allocate<Complex>(complex_count);
+    partial = allocate<Complex>(complex_count);
+    std::fill(partial.get(), partial.get() + complex_count, Complex(0.0f, 0.0f));
     init_fftw_threads();
     std::lock_guard<std::mutex> lock(planner_mutex());
+    // FFTW_ESTIMATE: the plans, and so every result bit, are the same on every run. The
+    // slab plans run at other offsets than planned: FFTW_UNALIGNED allows that.
+    const int nx = spec.dims.x(), ny = spec.dims.y(), nz = spec.dims.z();
+    auto* part = reinterpret_cast<fftwf_complex*>(partial.get());
+    fftwf_plan_with_nthreads(1);
+    const fftwf_iodim along_z{nz, 1, 1}, rows{ny, nz, half_z};
+    z_slab = fftwf_plan_guru_dft_r2c(1, &along_z, 1, &rows, input.get(), part, FFTW_ESTIMATE | FFTW_UNALIGNED);
+    const fftwf_iodim along_y{ny, half_z, half_z}, columns{half_z, 1, 1};
+    y_slab = fftwf_plan_guru_dft(1, &along_y, 1, &columns, part, part, FFTW_FORWARD,
+                                 FFTW_ESTIMATE | FFTW_UNALIGNED);
     fftwf_plan_with_nthreads(params.threads);
-    // FFTW_ESTIMATE: the plan, and so every result bit, is the same on every run.
-    forward = fftwf_plan_dft_r2c_3d(spec.dims.x(), spec.dims.y(), spec.dims.z(), input.get(),
-                                    reinterpret_cast<fftwf_complex*>(spectrum.get()),
-                                    FFTW_ESTIMATE);
-    inverse = fftwf_plan_dft_c2r_3d(spec.dims.x(), spec.dims.y(), spec.dims.z(),
-                                    reinterpret_cast<fftwf_complex*>(spectrum.get()),
+    const fftwf_iodim along_x{nx, ny * half_z, ny * half_z}, lines{ny * half_z, 1, 1};
+    x_all = fftwf_plan_guru_dft(1, &along_x, 1, &lines, part, reinterpret_cast<fftwf_complex*>(spectrum.get()),
+                                FFTW_FORWARD, FFTW_ESTIMATE);
+    inverse = fftwf_plan_dft_c2r_3d(nx, ny, nz, reinterpret_cast<fftwf_complex*>(spectrum.get()),
                                     output.get(), FFTW_ESTIMATE);
-    if (!forward || !inverse) fail("grid: FFTW could not plan a ", spec.dims.transpose(), " transform");
+    if (!z_slab || !y_slab || !x_all || !inverse) {
+      fail("grid: FFTW could not plan a ", spec.dims.transpose(), " transform");
+    }
   }
 
   // Calls f(offset, length) for each z-run of the box [lo, hi] in the grid's linear order.
@@ -169,7 +187,20 @@ struct PhaseCorrelation::Impl {
 
   void transform(const VoxelGrid& grid, Complex* out) {
     load_input(grid);
-    fftwf_execute_dft_r2c(forward, input.get(), reinterpret_cast<fftwf_complex*>(out));
+    const std::size_t slab_in = std::size_t(spec.dims.y()) * spec.dims.z();
+    const std::size_t slab_out = std::size_t(spec.dims.y()) * half_z;
+    const int x0 = grid.occupied_min.x(), x1 = grid.occupied_max.x();
+    for (int x = partial_x0; x <= partial_x1; ++x) {
+      if (x < x0 || x > x1) std::fill_n(partial.get() + x * slab_out, slab_out, Complex(0.0f, 0.0f));
+    }
+    for (int x = x0; x <= x1; ++x) {
+      auto* slab = reinterpret_cast<fftwf_complex*>(partial.get() + x * slab_out);
+      fftwf_execute_dft_r2c(z_slab, input.get() + x * slab_in, slab);
+      fftwf_execute_dft(y_slab, slab, slab);
+    }
+    partial_x0 = x0;
+    partial_x1 = x1;
+    fftwf_execute_dft(x_all, reinterpret_cast<fftwf_complex*>(partial.get()), reinterpret_cast<fftwf_complex*>(out));
   }
 
   // Normalised cross-power spectrum of eq. (7), oriented so that its inverse peaks at
