@@ -51,6 +51,13 @@ search_voxel_size : float
 window_margin : float
     How far the model may move per window placement, metres; 0 (default): the larger of
     5 voxels and 2.5 search voxels.
+scene_viewpoint : ndarray (3,) or None
+    Sensor origin of a single-view scene, metres: fitness then scores only the model's
+    points facing it, which tells a pose from its flip (default None: seen from all sides).
+suppress_support_plane : bool
+    With global search: search the scene without its support plane (a plane wider than 4
+    model reaches holding over a fifth of the points, e.g. a table); fitness still sees
+    it (default True).
 polish : bool
     With global search: after Algorithm 1, a pattern search on the rotation (4 to 1/4
     degree steps) for the highest phase-correlation peak (default True).
@@ -86,6 +93,8 @@ max_voxels : int
       .def_readwrite("refinements", &AlignParams::refinements)
       .def_readwrite("search_voxel_size", &AlignParams::search_voxel_size)
       .def_readwrite("window_margin", &AlignParams::window_margin)
+      .def_readwrite("scene_viewpoint", &AlignParams::scene_viewpoint)
+      .def_readwrite("suppress_support_plane", &AlignParams::suppress_support_plane)
       .def_readwrite("polish", &AlignParams::polish)
       .def_readwrite("subvoxel", &AlignParams::subvoxel)
       .def_property("occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },

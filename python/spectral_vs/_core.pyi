@@ -302,6 +302,8 @@ class AlignParams:
     refinements: int
     search_voxel_size: float  # metres, 0: automatic
     window_margin: float  # metres, 0: automatic
+    scene_viewpoint: _Array | None  # (3,) metres
+    suppress_support_plane: bool
     polish: bool
     subvoxel: bool
     occupancy: str  # "trilinear", "binary" or "count"

@@ -58,6 +58,7 @@ void check_params(const AlignParams& p) {
   }
   if (p.threads < 1) fail("threads must be >= 1, got ", p.threads);
   require_rigid_transform(p.initial_guess, "initial_guess");
+  if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
 }
 
 // The model's pose as a rotation about its centroid c and a translation of it:
@@ -102,10 +103,13 @@ public:
     return moved_;
   }
 
-  // The model's points and normals at `pose`, scored against the scene.
-  double fitness(const SceneMap& scene, const Pose& pose) {
+  // The model's points and normals at `pose`, scored against the scene: those facing
+  // the scene's viewpoint only, when the scene is a single view from there.
+  double fitness(const SceneMap& scene, const Pose& pose, const std::optional<Eigen::Vector3d>& viewpoint) {
     moved_normals_.noalias() = normals_ * pose.R.transpose();
-    return scene.fitness(move(pose), moved_normals_);
+    const Points& moved = move(pose);
+    return viewpoint ? scene.visible_fitness(moved, moved_normals_, *viewpoint)
+                     : scene.fitness(moved, moved_normals_);
   }
 
 private:
@@ -214,7 +218,7 @@ AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
     }
   }
   result.T_scene_model = problem.model.transform_of(pose);
-  result.fitness = problem.model.fitness(problem.scene, pose);
+  result.fitness = problem.model.fitness(problem.scene, pose, problem.params.scene_viewpoint);
   result.correlation = correlation.evaluate(pose.R).value;
   result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
   if (!whole_scene) result.window_dims = window->dims();
@@ -263,7 +267,7 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
     hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
     hypothesis.pose.offset = start - problem.model.centroid();
     hypothesis.pose.offset += coarse.estimate(problem.model.move(hypothesis.pose)).shift;
-    hypothesis.fitness = problem.model.fitness(problem.scene, hypothesis.pose);
+    hypothesis.fitness = problem.model.fitness(problem.scene, hypothesis.pose, problem.params.scene_viewpoint);
     hypotheses.push_back(hypothesis);
   }
   std::stable_sort(hypotheses.begin(), hypotheses.end(),
@@ -353,7 +357,7 @@ void polish_result(const Problem& problem, std::optional<TranslationWindow>& win
   place_window(problem, window, problem.model.centre(start));
   const Pose polished = polish(problem, *window, start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
-  result.fitness = problem.model.fitness(problem.scene, polished);
+  result.fitness = problem.model.fitness(problem.scene, polished, problem.params.scene_viewpoint);
 }
 
 bool better(const AlignResult& a, const AlignResult& b) {
@@ -370,9 +374,14 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   require_normals(scene, "scene");
   check_params(params);
   MovingModel moving(model);
-  const SceneMap scene_map(scene, params.voxel_size, params.limits);
+  // Beyond the paper: a table under the objects dominates both the scene's EGI and its
+  // voxel grid; searched without it, the object stands out. Fitness still sees it.
+  const PointCloud searched = params.global_search && params.suppress_support_plane
+                                  ? detail::without_support_plane(scene, params.voxel_size, 4.0 * moving.reach())
+                                  : scene;
+  const SceneMap scene_map(searched, scene, params.voxel_size, params.limits);
   const ShCoefficients model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
-  const ShCoefficients scene_coefficients = egi_coefficients(scene, params.bandwidth, params.egi_method);
+  const ShCoefficients scene_coefficients = egi_coefficients(searched, params.bandwidth, params.egi_method);
   So3Correlation correlation(scene_coefficients, model_coefficients, params.bandwidth, true);
 
   if (!params.global_search) {

@@ -69,8 +69,10 @@ std::uint32_t direction_mask(const Eigen::Vector3d& normal) {
 
 }  // namespace
 
-SceneMap::SceneMap(const PointCloud& scene, double voxel_size, const GridLimits& limits) : scene_(&scene) {
-  const Eigen::AlignedBox3d box = bounding_box(scene);
+SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
+                   const GridLimits& limits)
+    : scene_(&scene) {
+  const Eigen::AlignedBox3d box = bounding_box(evidence);
   spec_.resolution = voxel_size;
   spec_.origin = ((box.min() / voxel_size).array().floor() - 2.0).matrix() * voxel_size;
   for (int axis = 0; axis < 3; ++axis) {
@@ -81,9 +83,9 @@ SceneMap::SceneMap(const PointCloud& scene, double voxel_size, const GridLimits&
          " m, which exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
   }
   near_.assign(spec_.voxel_count(), 0);
-  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
-    const Eigen::Vector3i v = spec_.index_of(scene.points().row(i).transpose());
-    const std::uint32_t mask = direction_mask(scene.normals().row(i).transpose());
+  for (Eigen::Index i = 0; i < evidence.points().rows(); ++i) {
+    const Eigen::Vector3i v = spec_.index_of(evidence.points().row(i).transpose());
+    const std::uint32_t mask = direction_mask(evidence.normals().row(i).transpose());
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dz = -1; dz <= 1; ++dz) near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] |= mask;
@@ -113,6 +115,21 @@ double SceneMap::fitness(const Points& points, const Points& normals) const {
     supported += support;
   }
   return voxels ? double(supported) / double(voxels) : 0.0;
+}
+
+double SceneMap::visible_fitness(const Points& points, const Points& normals,
+                                 const Eigen::Vector3d& viewpoint) const {
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    if (normals.row(i).dot(viewpoint.transpose() - points.row(i)) > 0.0) rows.push_back(i);
+  }
+  if (rows.empty()) return 0.0;
+  Points p(Eigen::Index(rows.size()), 3), n(Eigen::Index(rows.size()), 3);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    p.row(Eigen::Index(i)) = points.row(rows[i]);
+    n.row(Eigen::Index(i)) = normals.row(rows[i]);
+  }
+  return fitness(p, n);
 }
 
 std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) const {
@@ -243,6 +260,81 @@ TranslationEstimate SceneTranslation::estimate(const Points& moved) {
 
 double SceneTranslation::translation_cost() const {
   return spectral_vs::translation_cost(moving_, target_, Eigen::Vector3i::Zero(), target_energy_);
+}
+
+namespace {
+
+// The most common of the scene's normal directions, to within about 10 degrees: the
+// normal with the most others within 10 degrees, over a subsample, then their mean.
+Eigen::Vector3d common_direction(const Points& normals) {
+  const Eigen::Index n = normals.rows();
+  const Eigen::Index stride = std::max<Eigen::Index>(1, n / 400);
+  const double near = std::cos(10.0 * M_PI / 180.0);
+  Eigen::Index best = 0, best_votes = -1;
+  for (Eigen::Index i = 0; i < n; i += stride) {
+    Eigen::Index votes = 0;
+    for (Eigen::Index j = 0; j < n; j += stride) votes += normals.row(i).dot(normals.row(j)) > near;
+    if (votes > best_votes) {
+      best_votes = votes;
+      best = i;
+    }
+  }
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    if (normals.row(best).dot(normals.row(j)) > near) sum += normals.row(j).transpose();
+  }
+  return sum.normalized();
+}
+
+}  // namespace
+
+PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent) {
+  const Points& p = scene.points();
+  const Points& n = scene.normals();
+  const Eigen::Vector3d axis = common_direction(n);
+  const double parallel = std::cos(20.0 * M_PI / 180.0);
+  // Votes for the plane's offset along the axis, in voxel bins.
+  std::vector<std::pair<long, Eigen::Index>> offsets;
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    if (n.row(i).dot(axis) > parallel) offsets.emplace_back(std::lround(p.row(i).dot(axis) / voxel_size), i);
+  }
+  if (offsets.empty()) return scene;
+  std::sort(offsets.begin(), offsets.end());
+  long best_bin = 0;
+  std::size_t best_votes = 0;
+  for (std::size_t i = 0; i < offsets.size();) {
+    std::size_t j = i;
+    while (j < offsets.size() && offsets[j].first == offsets[i].first) ++j;
+    // A bin and its neighbours: a plane's offsets straddle bin edges.
+    std::size_t votes = j - i;
+    for (std::size_t k = j; k < offsets.size() && offsets[k].first == offsets[i].first + 1; ++k) ++votes;
+    if (votes > best_votes) {
+      best_votes = votes;
+      best_bin = offsets[i].first;
+    }
+    i = j;
+  }
+  const double offset = (double(best_bin) + 0.5) * voxel_size;
+  std::vector<char> on_plane(std::size_t(p.rows()), 0);
+  Eigen::AlignedBox3d extent;
+  std::size_t count = 0;
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    if (n.row(i).dot(axis) > parallel && std::abs(p.row(i).dot(axis) - offset) < 1.5 * voxel_size) {
+      on_plane[std::size_t(i)] = 1;
+      extent.extend(p.row(i).transpose());
+      ++count;
+    }
+  }
+  if (5 * count < std::size_t(p.rows()) || extent.sizes().norm() < min_extent) return scene;
+  Points kept_points(Eigen::Index(std::size_t(p.rows()) - count), 3), kept_normals(kept_points.rows(), 3);
+  Eigen::Index row = 0;
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    if (on_plane[std::size_t(i)]) continue;
+    kept_points.row(row) = p.row(i);
+    kept_normals.row(row++) = n.row(i);
+  }
+  if (kept_points.rows() == 0) return scene;
+  return PointCloud(kept_points, kept_normals);
 }
 
 }  // namespace spectral_vs::detail

@@ -17,8 +17,9 @@ namespace spectral_vs::detail {
 /// the scene points near a place, for windows.
 class SceneMap {
 public:
-  /// @throws std::invalid_argument if the map at `voxel_size` exceeds `limits`.
-  SceneMap(const PointCloud& scene, double voxel_size, const GridLimits& limits);
+  /// `scene` is searched and windowed; `evidence` (the whole scene, or the same cloud)
+  /// scores fitness. @throws std::invalid_argument if the map exceeds `limits`.
+  SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size, const GridLimits& limits);
 
   const PointCloud& cloud() const { return *scene_; }
 
@@ -26,6 +27,9 @@ public:
   /// point whose normal is within about 50 degrees of theirs, in [0, 1]. The normals
   /// keep a model lying flat on a table, or turned inside out, from scoring as a fit.
   double fitness(const Points& points, const Points& normals) const;
+  /// The same over the points facing `viewpoint` only (n . (viewpoint - p) > 0): what a
+  /// single view of the model from there would show.
+  double visible_fitness(const Points& points, const Points& normals, const Eigen::Vector3d& viewpoint) const;
 
   /// Indices of the scene points inside the axis-aligned box.
   std::vector<Eigen::Index> points_in(const Eigen::AlignedBox3d& box) const;
@@ -97,5 +101,12 @@ private:
   VoxelGrid target_, moving_;
   double target_energy_ = 0.0;
 };
+
+/// The scene without its support plane: the largest plane of points with one normal
+/// direction, if it is wider than `min_extent` metres and holds more than a fifth of the
+/// points (a table under the objects); the scene itself otherwise. The plane is found by
+/// voting, deterministically: the most common normal direction, then the most common
+/// offset along it (bins of `voxel_size`).
+PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent);
 
 }  // namespace spectral_vs::detail

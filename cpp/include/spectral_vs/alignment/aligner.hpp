@@ -9,6 +9,7 @@
 #include <spectral_vs/rotation/egi_coefficients.hpp>
 
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 namespace spectral_vs {
@@ -48,6 +49,14 @@ struct AlignParams {
   double window_margin = 0.0;  ///< How far the model may move per window placement, metres:
                                ///< local windows are the model's reach plus this on each side.
                                ///< 0: the larger of 5 voxels and 2.5 search voxels.
+  /// The sensor origin of a single-view scene, scene coordinates, metres: fitness then
+  /// scores only the model's points facing it (what the view can show), which tells a
+  /// pose from its flip. Unset for a scene seen from all sides.
+  std::optional<Eigen::Vector3d> scene_viewpoint;
+  bool suppress_support_plane = true;  ///< With global search: search the scene without its
+                                       ///< support plane (a plane of one normal direction
+                                       ///< wider than 4 model reaches holding over a fifth
+                                       ///< of the points, e.g. a table); fitness still sees it.
   bool polish = true;          ///< With global search: after Algorithm 1, a pattern search on
                                ///< the rotation (4 to 1/4 degree steps) for the highest
                                ///< phase-correlation peak, past the EGI's accuracy floor.
