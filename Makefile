@@ -15,7 +15,7 @@ APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev
 PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
 PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" "matplotlib>=3.7" ruff mypy
 
-.PHONY: all demo test test-cpp test-python install system-deps venv bench format lint clean
+.PHONY: all demo test test-cpp test-python install system-deps venv bench experiments format lint clean
 
 all: install
 
@@ -57,6 +57,12 @@ install: system-deps venv
 bench: install
 	$(PY) benchmarks/translation_benchmark.py --build-dir $(BUILD_DIR)
 	$(PY) benchmarks/rotation_benchmark.py
+	$(PY) benchmarks/alignment_benchmark.py
+
+# The paper's experiments C-1 to C-3 and the real scans (about 15 minutes on 2 cores):
+# benchmarks/results/experiments.json, docs/figures/experiments_*.png, docs/experiments.md.
+experiments: install
+	SPECTRAL_VS_DATA=$(DATA) $(PY) benchmarks/experiments.py
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks

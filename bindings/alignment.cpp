@@ -60,7 +60,8 @@ suppress_support_plane : bool
     it (default True).
 polish : bool
     With global search: after Algorithm 1, a pattern search on the rotation (4 to 1/4
-    degree steps) for the highest phase-correlation peak (default True).
+    degree steps) for the best overlap of the model's voxels with the scene's (default
+    True); skipped for models sampled sparser than 2 points per occupied voxel.
 subvoxel : bool
     Sub-voxel refinement of the phase-correlation peak.
 occupancy : str

@@ -58,8 +58,10 @@ struct AlignParams {
                                        ///< wider than 4 model reaches holding over a fifth
                                        ///< of the points, e.g. a table); fitness still sees it.
   bool polish = true;          ///< With global search: after Algorithm 1, a pattern search on
-                               ///< the rotation (4 to 1/4 degree steps) for the highest
-                               ///< phase-correlation peak, past the EGI's accuracy floor.
+                               ///< the rotation (4 to 1/4 degree steps) for the best overlap
+                               ///< of the model's voxels with the scene's, past the EGI's
+                               ///< accuracy floor. Skipped for models sampled sparser than
+                               ///< 2 points per occupied voxel.
   bool subvoxel = true;        ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;  ///< Voxel values (the paper: binary).
   EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
