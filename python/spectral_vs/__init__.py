@@ -57,6 +57,14 @@ from spectral_vs._core import (
 )
 from spectral_vs.registration import align
 from spectral_vs.robot import RobotInterface
+from spectral_vs.servo import (
+    ServoLog,
+    ServoParams,
+    ServoRecord,
+    ServoStatus,
+    SpectralServo,
+    run_servo,
+)
 
 __version__ = "0.1.0"
 
@@ -102,7 +110,12 @@ __all__ = [
     "PointCloud",
     "RobotInterface",
     "RotationRefineResult",
+    "ServoLog",
+    "ServoParams",
+    "ServoRecord",
+    "ServoStatus",
     "So3Correlation",
+    "SpectralServo",
     "TranslationEstimate",
     "VelocityCommand",
     "VelocityCommandParams",
@@ -121,6 +134,7 @@ __all__ = [
     "real_spherical_harmonics",
     "refine_rotation",
     "rotation_cost",
+    "run_servo",
     "save_cloud",
     "sh_coefficients",
     "sh_index",
