@@ -14,12 +14,17 @@ APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev
 	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev
 PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
 PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" "matplotlib>=3.7" ruff mypy
+PIP_BENCH := "open3d>=0.19" "small_gicp>=1.0"  # the `bench` extra of pyproject.toml
 
-.PHONY: all demo test test-cpp test-python install system-deps venv bench experiments format lint clean
+.PHONY: all demo test test-cpp test-python test-sanitize install system-deps venv bench bench-peers bench-servo-peers experiments \
+	format lint clean
 
 all: install
 
+# The main job: the paper's robot experiment (servo the simulated iiwa's wrist camera back
+# to its reference view), then a model alignment on the real milk-carton scan.
 demo: install
+	$(VENV)/bin/spectral-vs servo-sim --out results/servo
 	$(VENV)/bin/spectral-vs demo --data $(DATA) --output results/demo
 
 test: install test-cpp test-python
@@ -29,6 +34,14 @@ test-cpp:
 
 test-python:
 	SPECTRAL_VS_DATA=$(DATA) $(PY) -m pytest
+
+# The C++ library and its full GoogleTest suite under AddressSanitizer (leak detection
+# on) and UndefinedBehaviorSanitizer, in build/asan (CMakePresets.json, preset "asan";
+# no Python module). About 6 minutes of build and 1 minute of tests on 2 cores.
+test-sanitize: system-deps venv
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --preset asan
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --build --preset asan
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" SPECTRAL_VS_DATA=$(abspath $(DATA)) ctest --preset asan
 
 # Installs only the Debian packages that are missing, so a second run is instant.
 system-deps:
@@ -63,6 +76,19 @@ bench: install
 # benchmarks/results/experiments.json, docs/figures/experiments_*.png, docs/experiments.md.
 experiments: install
 	SPECTRAL_VS_DATA=$(DATA) $(PY) benchmarks/experiments.py
+
+# Ours against Open3D and small_gicp (the `bench` extra) on the same cases (about 25 minutes
+# on 2 cores): benchmarks/results/peers.json, docs/figures/peers_*.png, docs/benchmarks.md.
+bench-peers: install
+	$(PY) -m pip install -q $(PIP_BENCH)
+	SPECTRAL_VS_DATA=$(DATA) $(PY) benchmarks/peers_benchmark.py
+
+# The spectral servo against the dense depth-map servo and ICP / FPFH position-based
+# servoing on the same simulated start poses (about 35 minutes on 2 cores):
+# benchmarks/results/servo_peers.json, docs/figures/servo_peers.png, docs/benchmarks.md.
+bench-servo-peers: install
+	$(PY) -m pip install -q $(PIP_BENCH)
+	$(PY) benchmarks/servo_peers.py
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks

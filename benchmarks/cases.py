@@ -119,7 +119,11 @@ def apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle_deg(R: np.ndarray) -> float:
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    # atan2 of sin and cos rather than acos of cos, which loses half the digits near 0 and
+    # 180 degrees (1e-6 degree off for an exact half turn).
+    sin = 0.5 * math.hypot(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    cos = 0.5 * (float(np.trace(R)) - 1.0)
+    return math.degrees(math.atan2(sin, cos))
 
 
 def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -23,13 +23,11 @@ Needs pybullet (cases) and matplotlib (figures).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import os
 import platform
 import re
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -39,6 +37,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import cases as case_lib
+import report as report_lib
+from report import markdown, num, pct
 
 import spectral_vs as svs
 
@@ -314,33 +314,14 @@ def table_one(records: list[dict]) -> list[dict]:
 
 
 def machine() -> dict:
-    cpu = platform.processor() or "unknown CPU"
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    commit = "unknown"
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        pass
-    core = Path(svs._core.__file__)
     return {
-        "core_sha256": hashlib.sha256(core.read_bytes()).hexdigest()[:12],
-        "cpu": cpu,
+        "core_sha256": report_lib.core_sha256(),
+        "cpu": report_lib.cpu_model(platform.processor() or "unknown CPU"),
         "cores": os.cpu_count(),
         "system": f"{platform.system()} {platform.release()}",
         "python": platform.python_version(),
         "numpy": np.__version__,
-        "commit": commit,
+        "commit": report_lib.commit(),
         "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
     }
 
@@ -361,21 +342,8 @@ PEER_SUCCESS = {"full": "100%", "partial": "84%", "clutter": "71%", "milk": "100
 PEER_ERRORS = {"full": "0.1 deg / 0.1 mm", "partial": "0.9 deg / 1 mm"}
 
 
-def pct(x: float | None) -> str:
-    return "-" if x is None else f"{100 * x:.0f}%"
-
-
-def num(x: float | None, unit: str = "", scale: float = 1.0, digits: int = 2) -> str:
-    return "-" if x is None else f"{scale * x:.{digits}f}{unit}"
-
-
 def sci(x: float | None, unit: str = "") -> str:
     return "-" if x is None else f"{x:.3g}{unit}"
-
-
-def markdown(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
 
 
 def errors(c: dict) -> list[str]:
@@ -626,32 +594,19 @@ def figures(results: dict) -> list[str]:
     }
 
     # Success rate against the initial angle, one panel per family.
-    fig, axes = plt.subplots(
-        1, len(families), figsize=(3.2 * len(families), 3.0), sharey=True, squeeze=False
+    fig, axes = report_lib.success_by_angle(
+        plt,
+        results["angle_cells"],
+        families,
+        FAMILY_TITLES,
+        "mode",
+        {mode: styles[mode] for mode in MODES},
+        {mode: mode for mode in MODES},
+        (3.2, 3.0),
     )
-    for ax, family in zip(axes[0], families, strict=True):
-        for mode in MODES:
-            cells = [
-                c for c in results["angle_cells"] if c["family"] == family and c["mode"] == mode
-            ]
-            ax.plot(
-                [c["angle_deg"] for c in cells],
-                [100 * c["success_rate"] for c in cells],
-                label=mode,
-                **styles[mode],
-            )
-        ax.set_title(FAMILY_TITLES[family], fontsize=9)
-        ax.set_xlabel("initial rotation (deg)")
-        ax.set_xticks([0, 60, 120, 180])
-        ax.set_ylim(-5, 105)
-        ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("success (%)")
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
-    path = FIGURES / "experiments_success_vs_angle.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    written.append(path)
+    written.append(report_lib.save_figure(fig, FIGURES / "experiments_success_vs_angle.png"))
 
     # Success rate against the translation offset at 30 degrees.
     sweep = [f for f in families if any(c["family"] == f for c in results["offset_cells"])]
@@ -679,10 +634,7 @@ def figures(results: dict) -> list[str]:
         axes[0][0].set_ylabel("success (%)")
         axes[0][0].legend(fontsize=8)
         fig.tight_layout()
-        path = FIGURES / "experiments_success_vs_offset.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
+        written.append(report_lib.save_figure(fig, FIGURES / "experiments_success_vs_offset.png"))
 
     # Convergence (the paper's Fig. 3 and 5): costs and gradients per iteration.
     traced = [r for r in results["records"] if "history" in r]
@@ -732,10 +684,7 @@ def figures(results: dict) -> list[str]:
             fontsize=10,
         )
         fig.tight_layout()
-        path = FIGURES / "experiments_convergence.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        written.append(path)
+        written.append(report_lib.save_figure(fig, FIGURES / "experiments_convergence.png", 100))
 
     # Errors of every case (log scale), the success box marked.
     fig, axes = plt.subplots(
@@ -759,10 +708,7 @@ def figures(results: dict) -> list[str]:
     axes[0][0].set_ylabel("rotation error (deg)")
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
-    path = FIGURES / "experiments_errors.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    written.append(path)
+    written.append(report_lib.save_figure(fig, FIGURES / "experiments_errors.png"))
     return [str(p.relative_to(ROOT)) for p in written]
 
 
@@ -802,24 +748,6 @@ def report(results: dict) -> None:
     DOC.write_text(text)
 
 
-def rounded(value):
-    """Floats to 6 significant digits, recursively (keeps the JSON small and diffable)."""
-    if isinstance(value, float):
-        return float(f"{value:.6g}") if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: rounded(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [rounded(v) for v in value]
-    return value
-
-
-def to_json(results: dict) -> str:
-    """Summaries indented, then one line per case record."""
-    head = json.dumps(rounded({k: v for k, v in results.items() if k != "records"}), indent=1)
-    lines = ",\n".join(json.dumps(rounded(r)) for r in results["records"])
-    return f'{head[:-2]},\n "records": [\n{lines}\n ]\n}}\n'
-
-
 # --- Command line -------------------------------------------------------------------------
 
 
@@ -842,14 +770,7 @@ def main() -> None:
         default=",".join(f"{o:g}" for o in OFFSETS),
         help=f"translation sweep offsets at {OFFSET_ANGLE:g} deg, metres ('' for none)",
     )
-    parser.add_argument(
-        "--cases-per-cell",
-        type=int,
-        default=None,
-        help="cases per (family, angle) cell for every family (default: "
-        + ", ".join(f"{k} {v}" for k, v in CASES_PER_CELL.items())
-        + f"; {SWEEP_CASES} per offset)",
-    )
+    report_lib.add_cases_per_cell(parser, CASES_PER_CELL, f"; {SWEEP_CASES} per offset")
     parser.add_argument(
         "--quick",
         action="store_true",
@@ -928,12 +849,7 @@ def main() -> None:
     print()
     print(summary_table(results["family_summary"]))
     output = args.output or (None if args.quick else RESULTS)
-    if output is None:
-        return
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(to_json(results))
-    if output.resolve() == RESULTS.resolve():
-        report(results)
+    if output is not None and report_lib.write_results(results, output, RESULTS, report):
         print(f"\nwrote {output.relative_to(ROOT)}, {DOC.relative_to(ROOT)} and the figures")
 
 

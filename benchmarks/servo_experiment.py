@@ -28,18 +28,19 @@ Needs pybullet and matplotlib.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import os
 import platform
-import subprocess
 import sys
 import time
+from collections import Counter
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import report as report_lib
 
 import spectral_vs as svs
 from spectral_vs import servo as servo_lib
@@ -68,50 +69,89 @@ EPISODES = (
     ("large", 3, "servo_episode_large.png"),
     ("large", 0, "servo_episode_failure.png"),
 )
+QUICK_STARTS = 2  # per set, --quick
 IMAGE = (320, 240)  # pixels (at 160 x 120 the final rotation error was about 0.6 deg)
 
 
 def machine() -> dict[str, Any]:
     """The machine, the commit and the compiled core the numbers come from."""
-    cpu = platform.processor() or "unknown"
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        names = [line for line in cpuinfo.read_text().splitlines() if line.startswith("model name")]
-        if names:
-            cpu = names[0].split(":", 1)[1].strip()
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
-        ).stdout.strip()
-    except OSError:
-        commit = ""
     return {
-        "cpu": cpu,
+        "cpu": report_lib.cpu_model(platform.processor() or "unknown"),
         "cores": os.cpu_count(),
         "system": f"{platform.system()} {platform.release()}",
         "python": platform.python_version(),
-        "commit": commit or "unknown",
-        "core_sha256": hashlib.sha256(Path(svs._core.__file__).read_bytes()).hexdigest()[:12],
+        "commit": report_lib.commit(),
+        "core_sha256": report_lib.core_sha256(),
         "load_average": os.getloadavg()[0],
     }
 
 
+def sim_params() -> sim.SimParams:
+    """The simulation of every run: kinematic mode, ``IMAGE`` depth images."""
+    return sim.SimParams(
+        mode="kinematic", camera=sim.CameraParams(intrinsics=sim.CameraIntrinsics(*IMAGE))
+    )
+
+
+def loop_settings() -> dict[str, Any]:
+    """The loop's settings and the success test, for the results' record."""
+    return {
+        "dt_s": DT,
+        "max_steps": MAX_STEPS,
+        "image": list(IMAGE),
+        "success_mm": SUCCESS_MM,
+        "success_deg": SUCCESS_DEG,
+    }
+
+
 def starts(kinematics: svs.Kinematics, name: str, count: int, seed: int) -> list[dict]:
-    """``count`` seeded start configurations of a set."""
-    spec = SETS[name]
-    rng = np.random.default_rng([seed, list(SETS).index(name)])
-    out = []
-    for _ in range(count):
-        q, t, r = servo_lib.random_start(
-            kinematics,
-            np.asarray(sim.HOME_Q),
-            rng,
-            joint_range=spec["joint_range"],
-            translation_range=spec["translation"],
-            rotation_range=tuple(math.radians(a) for a in spec["rotation_deg"]),
-        )
-        out.append({"q": q.tolist(), "start_mm": 1000 * t, "start_deg": math.degrees(r)})
-    return out
+    """``count`` seeded start configurations of a set (``servo.start_poses``)."""
+    return [
+        {"q": q.tolist(), "start_mm": 1000 * t, "start_deg": math.degrees(r)}
+        for q, t, r in servo_lib.start_poses(kinematics, name, count, seed)
+    ]
+
+
+def servo_run(
+    robot: sim.PyBulletRobot,
+    start: dict,
+    controller: Any,
+    T_world_reference: np.ndarray,
+    driven: Any = None,
+) -> tuple[dict, servo_lib.ServoLog]:
+    """Servo ``robot`` from ``start`` with ``controller`` (``driven``: the robot as the
+    controller sees it, ``robot`` itself by default) and measure the true final error.
+
+    Returns the fields every run records (start and final errors, mm and degrees, the
+    success, how it ended, steps, simulated and wall time, the true errors of every step)
+    and the log.
+    """
+    robot.reset_joint_positions(start["q"])
+    clock = robot.time()
+    log = servo_lib.run_servo(
+        robot if driven is None else driven,
+        robot.kinematics,
+        controller,
+        dt=DT,
+        max_steps=MAX_STEPS,
+        stop_at_joint_limit=False,  # let the arm slide along a limit with the other joints
+    )
+    t, r = servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
+    errors = servo_lib.true_errors(log, T_world_reference)
+    row = {
+        "start_mm": start["start_mm"],
+        "start_deg": start["start_deg"],
+        "final_mm": 1000 * t,
+        "final_deg": math.degrees(r),
+        "success": bool(1000 * t < SUCCESS_MM and math.degrees(r) < SUCCESS_DEG),
+        "reason": log.reason,
+        "steps": len(log.records),
+        "sim_time_s": float(robot.time() - clock),
+        "wall_s": log.wall_seconds,
+        "true_mm": np.round(errors[:, 0], 2).tolist(),
+        "true_deg": np.round(errors[:, 1], 3).tolist(),
+    }
+    return row, log
 
 
 def run_episode(
@@ -122,109 +162,121 @@ def run_episode(
     mode: str,
     keep_clouds: bool,
 ) -> tuple[dict, servo_lib.ServoLog, list[np.ndarray]]:
-    robot.reset_joint_positions(start["q"])
-    clock = robot.time()
-    recorder = servo_lib.CloudRecorder(robot) if keep_clouds else robot
+    recorder = servo_lib.CloudRecorder(robot) if keep_clouds else None
     servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams(**MODES[mode]))
-    log = servo_lib.run_servo(
-        recorder,
-        robot.kinematics,
-        servo,
-        dt=DT,
-        max_steps=MAX_STEPS,
-        stop_at_joint_limit=False,  # let the arm slide along a limit with the other joints
-    )
-    t, r = servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
-    errors = servo_lib.true_errors(log, T_world_reference)
-    seconds = log.array("seconds")
-    row = {
-        "mode": mode,
-        "start_mm": start["start_mm"],
-        "start_deg": start["start_deg"],
-        "final_mm": 1000 * t,
-        "final_deg": math.degrees(r),
-        "success": bool(1000 * t < SUCCESS_MM and math.degrees(r) < SUCCESS_DEG),
-        "reason": log.reason,
+    common, log = servo_run(robot, start, servo, T_world_reference, recorder)
+    row = {"mode": mode} | common
+    row |= {
         "message": log.status.message,
-        "steps": len(log.records),
-        "sim_time_s": float(robot.time() - clock),
-        "wall_s": log.wall_seconds,
         "step_wall_s": log.wall_seconds / len(log.records),
-        "servo_step_s_median": float(np.median(seconds)),
+        "servo_step_s_median": float(np.median(log.array("seconds"))),
         "iterations_median": float(np.median(log.array("iterations"))),
         "final_fitness": float(log.records[-1].fitness),
-        "true_mm": np.round(errors[:, 0], 2).tolist(),
-        "true_deg": np.round(errors[:, 1], 3).tolist(),
         "estimated_mm": np.round(1000 * log.array("translation_error"), 2).tolist(),
     }
-    clouds = recorder.clouds if isinstance(recorder, servo_lib.CloudRecorder) else []
-    return row, log, clouds
+    return row, log, [] if recorder is None else recorder.clouds
+
+
+def median(rows: list[dict], key: str) -> float | None:
+    """Median of ``key`` over ``rows``, None for no rows."""
+    return float(np.median([r[key] for r in rows])) if rows else None
+
+
+def outcomes(cell: list[dict]) -> dict:
+    """What every summary row of runs (:func:`servo_run`'s fields) holds: runs, successes,
+    convergences away from the goal, median start, final errors of the successes (median
+    and max), their median steps, and the count of each way the runs ended."""
+    ok = [r for r in cell if r["success"]]
+    return {
+        "runs": len(cell),
+        "successes": len(ok),
+        "false_convergences": sum(r["reason"] == "converged" and not r["success"] for r in cell),
+        "start_mm_median": median(cell, "start_mm"),
+        "start_deg_median": median(cell, "start_deg"),
+        "final_mm_median": median(ok, "final_mm"),
+        "final_mm_max": max((r["final_mm"] for r in ok), default=None),
+        "final_deg_median": median(ok, "final_deg"),
+        "final_deg_max": max((r["final_deg"] for r in ok), default=None),
+        "steps_median": median(ok, "steps"),
+        "reasons": dict(Counter(r["reason"] for r in cell)),
+    }
+
+
+def groups(
+    rows: list[dict], sets: Iterable[str], key: str, labels: Iterable[str]
+) -> Iterator[tuple[str, str, list[dict]]]:
+    """``(set, label, runs)`` for every set and label (``run[key]``) that has runs, in the
+    order of ``sets``, then ``labels``."""
+    for name in sets:
+        for label in labels:
+            cell = [r for r in rows if r["set"] == name and r[key] == label]
+            if cell:
+                yield name, label, cell
 
 
 def summarize(rows: list[dict]) -> list[dict]:
     """Per (set, mode): success rate, final errors of the successes, steps, times."""
-    table = []
-    for name in SETS:
-        for mode in MODES:
-            cell = [r for r in rows if r["set"] == name and r["mode"] == mode]
-            if not cell:
-                continue
-            ok = [r for r in cell if r["success"]]
-            false = [r for r in cell if r["reason"] == "converged" and not r["success"]]
-            reasons: dict[str, int] = {}
-            for r in cell:
-                reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+    return [
+        {"set": name, "mode": mode}
+        | outcomes(cell)
+        | {
+            "success_rate": sum(r["success"] for r in cell) / len(cell),
+            "sim_time_s_median": median([r for r in cell if r["success"]], "sim_time_s"),
+            "step_wall_ms_median": 1000 * median(cell, "step_wall_s"),
+            "servo_step_ms_median": 1000 * median(cell, "servo_step_s_median"),
+        }
+        for name, mode, cell in groups(rows, SETS, "mode", MODES)
+    ]
 
-            def median(key: str, among: list[dict]) -> float | None:
-                return float(np.median([r[key] for r in among])) if among else None
 
-            table.append(
-                {
-                    "set": name,
-                    "mode": mode,
-                    "runs": len(cell),
-                    "successes": len(ok),
-                    "false_convergences": len(false),
-                    "success_rate": len(ok) / len(cell),
-                    "start_mm_median": median("start_mm", cell),
-                    "start_deg_median": median("start_deg", cell),
-                    "final_mm_median": median("final_mm", ok),
-                    "final_mm_max": max((r["final_mm"] for r in ok), default=None),
-                    "final_deg_median": median("final_deg", ok),
-                    "final_deg_max": max((r["final_deg"] for r in ok), default=None),
-                    "steps_median": median("steps", ok),
-                    "sim_time_s_median": median("sim_time_s", ok),
-                    "step_wall_ms_median": 1000 * median("step_wall_s", cell),
-                    "servo_step_ms_median": 1000 * median("servo_step_s_median", cell),
-                    "reasons": reasons,
-                }
-            )
-    return table
+def fmt(value: float | None, digits: int) -> str:
+    """``value`` with ``digits`` decimals, ``-`` for none."""
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def progress(name: str, index: int, label: str, width: int, row: dict) -> str:
+    """The start of the line printed after a run."""
+    return (
+        f"{name:8s} #{index:2d} {label:{width}s} start {row['start_mm']:5.0f} mm "
+        f"{row['start_deg']:4.1f} deg -> {row['reason']:14s} final "
+        f"{row['final_mm']:7.2f} mm {row['final_deg']:6.2f} deg, {row['steps']:3d} steps"
+    )
+
+
+#: Columns of :func:`outcome_cells`.
+OUTCOME_HEADER = "Start (median) | Final error of successes (median / max) | Steps (median)"
+
+
+def outcome_cells(c: dict) -> str:
+    """The start, final error and steps columns of a summary row (:func:`outcomes`)."""
+    return (
+        f"{c['start_mm_median']:.0f} mm, {c['start_deg_median']:.1f} deg | "
+        f"{fmt(c['final_mm_median'], 2)} / {fmt(c['final_mm_max'], 2)} mm, "
+        f"{fmt(c['final_deg_median'], 2)} / {fmt(c['final_deg_max'], 2)} deg | "
+        f"{fmt(c['steps_median'], 0)}"
+    )
+
+
+def ends(c: dict) -> str:
+    """How the runs of a summary row ended, and how many converged away from the goal."""
+    text = ", ".join(f"{k} {v}" for k, v in sorted(c["reasons"].items()))
+    if c["false_convergences"]:
+        text += f" ({c['false_convergences']} converged away from the goal)"
+    return text
 
 
 def markdown(results: dict) -> str:
     lines = [
-        "| Set | Estimate | Success | Start (median) | Final error of successes "
-        "(median / max) | Steps (median) | Simulated time | Wall time per step (loop / servo) "
-        "| Ends |",
+        f"| Set | Estimate | Success | {OUTCOME_HEADER} | Simulated time "
+        "| Wall time per step (loop / servo) | Ends |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for c in results["summary"]:
-
-        def fmt(value: float | None, digits: int) -> str:
-            return "-" if value is None else f"{value:.{digits}f}"
-
-        ends = ", ".join(f"{k} {v}" for k, v in sorted(c["reasons"].items()))
-        if c["false_convergences"]:
-            ends += f" ({c['false_convergences']} converged away from the goal)"
         lines.append(
             f"| {c['set']} | {c['mode']} | {c['successes']}/{c['runs']} "
-            f"({100 * c['success_rate']:.0f}%) | {c['start_mm_median']:.0f} mm, "
-            f"{c['start_deg_median']:.1f} deg | {fmt(c['final_mm_median'], 2)} / "
-            f"{fmt(c['final_mm_max'], 2)} mm, {fmt(c['final_deg_median'], 2)} / "
-            f"{fmt(c['final_deg_max'], 2)} deg | {fmt(c['steps_median'], 0)} | "
+            f"({100 * c['success_rate']:.0f}%) | {outcome_cells(c)} | "
             f"{fmt(c['sim_time_s_median'], 1)} s | {c['step_wall_ms_median']:.0f} / "
-            f"{c['servo_step_ms_median']:.0f} ms | {ends} |"
+            f"{c['servo_step_ms_median']:.0f} ms | {ends(c)} |"
         )
     return "\n".join(lines)
 
@@ -308,10 +360,28 @@ def plot_success(results: dict, path: Path) -> None:
 # --- Main --------------------------------------------------------------------------------
 
 
+def new_parser(
+    description: str, starts: int, sets: Iterable[str], quick: int, drawn: str
+) -> argparse.ArgumentParser:
+    """The options of every servo script: starts per set (``quick`` with ``--quick``), the
+    sets, the seed, and ``--report-only`` (redraws ``drawn`` from the JSON)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument(
+        "--starts", type=int, default=starts, help=f"starts per set (default {starts})"
+    )
+    parser.add_argument("--sets", default=",".join(sets), help="sets to run (default: all)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"{quick} start{'s' * (quick > 1)} per set, write nothing",
+    )
+    parser.add_argument("--report-only", action="store_true", help=f"{drawn} from the JSON")
+    return parser
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--starts", type=int, default=20, help="starts per set (default 20)")
-    parser.add_argument("--sets", default=",".join(SETS), help="sets to run (default: all)")
+    parser = new_parser(__doc__.splitlines()[0], 20, SETS, QUICK_STARTS, "figures")
     parser.add_argument("--modes", default=",".join(MODES), help="estimates (default: all)")
     parser.add_argument(
         "--pose-starts",
@@ -319,9 +389,6 @@ def main() -> None:
         default=COLD_POSE_STARTS,
         help=f"cold 'pose' runs on the first N starts of each set (default {COLD_POSE_STARTS})",
     )
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--quick", action="store_true", help="2 starts per set, write nothing")
-    parser.add_argument("--report-only", action="store_true", help="figures from the JSON")
     parser.add_argument(
         "--episodes-only", action="store_true", help="re-run and draw only the EPISODES"
     )
@@ -333,14 +400,12 @@ def main() -> None:
         print(markdown(results))
         return
 
-    count = 2 if args.quick else args.starts
+    count = QUICK_STARTS if args.quick else args.starts
     sets = [s for s in args.sets.split(",") if s]
     modes = [m for m in args.modes.split(",") if m]
     started = time.perf_counter()
     load_before = os.getloadavg()[0]
-    params = sim.SimParams(
-        mode="kinematic", camera=sim.CameraParams(intrinsics=sim.CameraIntrinsics(*IMAGE))
-    )
+    params = sim_params()
     rows: list[dict] = []
     episodes: dict[str, Any] = {}
     drawn = {(name, index): figure for name, index, figure in EPISODES}
@@ -371,22 +436,16 @@ def main() -> None:
                     if keep:
                         episodes[drawn[name, index]] = (name, log, clouds)
                     print(
-                        f"{name:8s} #{index:2d} {mode:9s} start {row['start_mm']:5.0f} mm "
-                        f"{row['start_deg']:4.1f} deg -> {row['reason']:14s} final "
-                        f"{row['final_mm']:7.2f} mm {row['final_deg']:6.2f} deg, "
-                        f"{row['steps']:3d} steps, {1000 * row['step_wall_s']:4.0f} ms/step",
+                        progress(name, index, mode, 9, row)
+                        + f", {1000 * row['step_wall_s']:4.0f} ms/step",
                         flush=True,
                     )
     results = {
         "command": "python benchmarks/servo_experiment.py " + " ".join(sys.argv[1:]),
         "date": time.strftime("%Y-%m-%d"),
         "machine": machine() | {"load_average_at_start": load_before},
-        "settings": {
-            "dt_s": DT,
-            "max_steps": MAX_STEPS,
-            "image": list(IMAGE),
-            "success_mm": SUCCESS_MM,
-            "success_deg": SUCCESS_DEG,
+        "settings": loop_settings()
+        | {
             "sets": {k: SETS[k] for k in sets},
             "servo_params": {
                 k: v

@@ -14,6 +14,10 @@ namespace {
 constexpr Choices<RotationStep, 2> kRotationSteps{
     {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}};
 
+constexpr Choices<AlignStopReason, 3> kStopReasons{{{"converged", AlignStopReason::converged},
+                                                    {"max_iterations", AlignStopReason::max_iterations},
+                                                    {"max_seconds", AlignStopReason::max_seconds}}};
+
 }  // namespace
 
 void define_alignment(py::module_& m) {
@@ -36,6 +40,9 @@ max_rotation_step : float
 tolerance : float
     eps_g of eq. (17): |translation step| (voxels) + |grad C| below which it stops.
 max_iterations : int
+max_seconds : float
+    Time budget of the whole alignment, seconds (default 0: none). Past it, the best pose
+    so far is returned with ``converged = False`` and ``stop_reason = 'max_seconds'``.
 initial_guess : ndarray (4, 4)
     T_scene_model to start from (ignored for the rotation when global_search is on).
 global_search : bool
@@ -51,6 +58,11 @@ search_voxel_size : float
 window_margin : float
     How far the model may move per window placement, metres; 0 (default): the larger of
     5 voxels and 2.5 search voxels.
+max_translation : float
+    Without global search: the largest translation from the initial guess sought, metres
+    per axis; the grid then holds the scene and the model's start grown by this instead
+    of by the model's reach, and farther peaks are ignored (two views of one scene, as in
+    servoing). 0 (default): unbounded.
 scene_viewpoint : ndarray (3,) or None
     Sensor origin of a single-view scene, metres: fitness then scores only the model's
     points facing it, which tells a pose from its flip (default None: seen from all sides).
@@ -61,7 +73,9 @@ suppress_support_plane : bool
 polish : bool
     With global search: after Algorithm 1, a pattern search on the rotation (4 to 1/4
     degree steps) for the best overlap of the model's voxels with the scene's (default
-    True); skipped for models sampled sparser than 2 points per occupied voxel.
+    True); skipped for models sampled sparser than 2 points per occupied voxel. For a
+    model whose EGI has a flat axis (a mug's), turns about that axis every 15 degrees are
+    scored first.
 subvoxel : bool
     Sub-voxel refinement of the phase-correlation peak.
 occupancy : str
@@ -69,8 +83,10 @@ occupancy : str
 egi_method : str
     'projection' (default) or 'histogram' (the paper).
 threads : int
+    In [1, 256].
 max_voxels : int
-    Refuse translation grids with more voxels than this.
+    Memory cap: any grid over this many voxels is refused with ``ValueError`` before it
+    is allocated (default 2^27; the largest grids take about 28 bytes per voxel).
 )doc")
       .def(py::init<>())
       .def("__copy__", [](const AlignParams& p) { return AlignParams(p); })
@@ -87,6 +103,7 @@ max_voxels : int
       .def_readwrite("max_rotation_step", &AlignParams::max_rotation_step)
       .def_readwrite("tolerance", &AlignParams::tolerance)
       .def_readwrite("max_iterations", &AlignParams::max_iterations)
+      .def_readwrite("max_seconds", &AlignParams::max_seconds)
       .def_property("initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },
                     [](AlignParams& p, const py::handle& T) { p.initial_guess = to_transform(T, "initial_guess"); })
       .def_readwrite("global_search", &AlignParams::global_search)
@@ -94,6 +111,7 @@ max_voxels : int
       .def_readwrite("refinements", &AlignParams::refinements)
       .def_readwrite("search_voxel_size", &AlignParams::search_voxel_size)
       .def_readwrite("window_margin", &AlignParams::window_margin)
+      .def_readwrite("max_translation", &AlignParams::max_translation)
       .def_readwrite("scene_viewpoint", &AlignParams::scene_viewpoint)
       .def_readwrite("suppress_support_plane", &AlignParams::suppress_support_plane)
       .def_readwrite("polish", &AlignParams::polish)
@@ -131,6 +149,9 @@ max_voxels : int
       .def_property_readonly("T_scene_model", [](const AlignResult& r) { return Eigen::Matrix4d(r.T_scene_model); },
                              "4x4 transform mapping model coordinates into the scene.")
       .def_readonly("converged", &AlignResult::converged)
+      .def_property_readonly(
+          "stop_reason", [](const AlignResult& r) { return choice_name(r.stop_reason, kStopReasons); },
+          "Why it stopped: 'converged', 'max_iterations' or 'max_seconds'.")
       .def_readonly("iterations", &AlignResult::iterations)
       .def_readonly("fitness", &AlignResult::fitness,
                     "Share of the model's occupied voxels next to scene points, in [0, 1].")
@@ -146,7 +167,8 @@ max_voxels : int
       .def_readonly("history", &AlignResult::history)
       .def("__repr__", [](const AlignResult& r) {
         std::ostringstream out;
-        out << "AlignResult(converged=" << (r.converged ? "True" : "False") << ", iterations=" << r.iterations
+        out << "AlignResult(converged=" << (r.converged ? "True" : "False")
+            << ", stop_reason='" << choice_name(r.stop_reason, kStopReasons) << "', iterations=" << r.iterations
             << ", fitness=" << r.fitness << ", correlation=" << r.correlation << ")";
         return out.str();
       });

@@ -10,8 +10,11 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <array>
+#include <cmath>
 #include <filesystem>
 #include <sstream>
+#include <string>
 
 namespace spectral_vs::python {
 
@@ -144,11 +147,22 @@ drop_non_finite : bool
         "Plane-fit normals (PCL), oriented toward `viewpoint` or 'outward' from the centroid.");
 
   py::class_<GridSpec>(m, "GridSpec", "Origin (m), resolution (m) and dims (voxels) of a voxel grid.")
-      .def(py::init([](const Eigen::Vector3d& origin, double resolution, const Eigen::Vector3i& dims) {
+      .def(py::init([](const Eigen::Vector3d& origin, double resolution, const std::array<long long, 3>& dims) {
+             // Checked here: a Python int past the range of int would otherwise wrap.
+             if (!origin.allFinite()) throw py::value_error("origin must be finite");
+             if (!(std::isfinite(resolution) && resolution > 0.0)) {
+               throw py::value_error("resolution must be finite and > 0 metres");
+             }
              GridSpec spec;
+             for (int axis = 0; axis < 3; ++axis) {
+               if (dims[axis] < 1 || dims[axis] > kMaxGridIndex) {
+                 throw py::value_error("dims must be in [1, " + std::to_string(kMaxGridIndex) + "], got " +
+                                       std::to_string(dims[axis]));
+               }
+               spec.dims[axis] = static_cast<int>(dims[axis]);
+             }
              spec.origin = origin;
              spec.resolution = resolution;
-             spec.dims = dims;
              return spec;
            }), py::arg("origin"), py::arg("resolution"), py::arg("dims"))
       .def_readonly("origin", &GridSpec::origin)
@@ -164,7 +178,8 @@ drop_non_finite : bool
       });
 
   m.def("fft_friendly_size", &fft_friendly_size, py::arg("n"),
-        "Smallest n' >= n with prime factors in {2, 3, 5, 7}.");
+        "Smallest n' >= n (2 for n <= 2) on which FFTW is fast: a measured table up to 1024, then even "
+        "products of 2, 3 and 5. n <= 2^30.");
 
   m.def("make_grid_spec", [](const PointCloud& a, const PointCloud& b, double resolution,
                              std::size_t max_voxels) {

@@ -120,8 +120,18 @@ double median_seconds(int repeats, F&& f) {
 }  // namespace
 
 void define_rotation(py::module_& m) {
-  m.def("sh_index", &sh_index, py::arg("l"), py::arg("m"),
-        "Position l*l + l + m of the coefficient (l, m) in a flat coefficient array.");
+  m.def(
+      "sh_index",
+      [](int l, int m) {
+        if (l < 0 || l >= kMaxBandwidth || m < -l || m > l) {
+          throw py::value_error("sh_index: need 0 <= l < " + std::to_string(kMaxBandwidth) +
+                                " and -l <= m <= l, got l = " + std::to_string(l) +
+                                ", m = " + std::to_string(m));
+        }
+        return sh_index(l, m);
+      },
+      py::arg("l"), py::arg("m"),
+      "Position l*l + l + m of the coefficient (l, m) in a flat coefficient array.");
 
   m.def(
       "real_spherical_harmonics",

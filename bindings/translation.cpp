@@ -49,11 +49,12 @@ VoxelGrid to_grid(const py::handle& object, const char* argument) {
   return grid;
 }
 
-PhaseCorrelationParams make_params(bool subvoxel, double band, int threads) {
+PhaseCorrelationParams make_params(bool subvoxel, double band, int threads, std::size_t max_voxels) {
   PhaseCorrelationParams params;
   params.subvoxel = subvoxel;
   params.subvoxel_band = band;
   params.threads = threads;
+  params.limits.max_voxels = max_voxels;
   return params;
 }
 
@@ -83,12 +84,15 @@ subvoxel : bool
 subvoxel_band : float
     Frequencies used by that fit, cycles per voxel, in (0, 0.5].
 threads : int
-    FFTW threads.
+    FFTW threads, in [1, 256].
+max_voxels : int
+    Grids with more voxels are refused before any buffer is allocated (about 20 bytes
+    per voxel).
 )doc")
-      .def(py::init([](const GridSpec& spec, bool subvoxel, double band, int threads) {
-             return PhaseCorrelation(spec, make_params(subvoxel, band, threads));
+      .def(py::init([](const GridSpec& spec, bool subvoxel, double band, int threads, std::size_t max_voxels) {
+             return PhaseCorrelation(spec, make_params(subvoxel, band, threads, max_voxels));
            }), py::arg("spec"), py::arg("subvoxel") = true, py::arg("subvoxel_band") = 0.25,
-           py::arg("threads") = 1)
+           py::arg("threads") = 1, py::arg("max_voxels") = GridLimits{}.max_voxels)
       .def("set_target", &PhaseCorrelation::set_target, py::arg("target"),
            py::call_guard<py::gil_scoped_release>())
       .def(
@@ -102,21 +106,22 @@ threads : int
       .def_property_readonly("spec", &PhaseCorrelation::spec);
 
   m.def("phase_correlation", [](const py::handle& grid_a, const py::handle& grid_b, bool subvoxel,
-                                double band) {
+                                double band, std::size_t max_voxels) {
     const VoxelGrid a = to_grid(grid_a, "grid_a");
     const VoxelGrid b = to_grid(grid_b, "grid_b");
     TranslationEstimate estimate;
     {
       py::gil_scoped_release release;
-      estimate = phase_correlation(a, b, make_params(subvoxel, band, 1));
+      estimate = phase_correlation(a, b, make_params(subvoxel, band, 1, max_voxels));
     }
     return py::make_tuple(estimate.shift_voxels, estimate.peak);
   }, py::arg("grid_a"), py::arg("grid_b"), py::arg("subvoxel") = true, py::arg("subvoxel_band") = 0.25,
-        R"doc(
+        py::arg("max_voxels") = GridLimits{}.max_voxels, R"doc(
 Shift s in voxels such that grid_b(x) ~ grid_a(x - s), and the peak height in [0, 1].
 
 Grids are VoxelGrids on the same spec or 3-D arrays of the same shape. Only shifts
-for which the occupied parts overlap are searched.
+for which the occupied parts overlap are searched. Grids over ``max_voxels`` voxels are
+refused before the transforms are allocated.
 )doc");
 
   m.def("translation_cost", [](const py::handle& moving, const py::handle& target,

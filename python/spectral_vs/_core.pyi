@@ -145,6 +145,7 @@ class PhaseCorrelation:
         subvoxel: bool = True,
         subvoxel_band: float = 0.25,  # cycles per voxel
         threads: int = 1,
+        max_voxels: int = 134217728,
     ) -> None: ...
     def set_target(self, target: VoxelGrid) -> None: ...
     def estimate(
@@ -162,6 +163,7 @@ def phase_correlation(
     grid_b: VoxelGrid | npt.ArrayLike,
     subvoxel: bool = True,
     subvoxel_band: float = 0.25,
+    max_voxels: int = 134217728,
 ) -> tuple[_Array, float]: ...  # shift (3,) in voxels, peak
 def translation_cost(
     moving: VoxelGrid | npt.ArrayLike, target: VoxelGrid | npt.ArrayLike, shift: npt.ArrayLike
@@ -293,6 +295,7 @@ class AlignParams:
     max_rotation_step: float  # radians
     tolerance: float
     max_iterations: int
+    max_seconds: float  # seconds, 0: no limit
     @property
     def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
     @initial_guess.setter
@@ -302,6 +305,7 @@ class AlignParams:
     refinements: int
     search_voxel_size: float  # metres, 0: automatic
     window_margin: float  # metres, 0: automatic
+    max_translation: float  # metres, 0: unbounded
     scene_viewpoint: _Array | None  # (3,) metres
     suppress_support_plane: bool
     polish: bool
@@ -338,6 +342,8 @@ class AlignResult:
     def T_scene_model(self) -> _Array: ...  # (4, 4)
     @property
     def converged(self) -> bool: ...
+    @property
+    def stop_reason(self) -> str: ...  # "converged", "max_iterations" or "max_seconds"
     @property
     def iterations(self) -> int: ...
     @property

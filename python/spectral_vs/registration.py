@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import copy
+import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -51,6 +53,25 @@ def as_cloud(cloud: CloudLike, argument: str) -> PointCloud:
     return PointCloud(array)
 
 
+def check_voxel_size(voxel_size: Any) -> None:
+    """Raise ``ValueError`` unless ``voxel_size`` is a finite number > 0 (metres)."""
+    if isinstance(voxel_size, bool) or not isinstance(voxel_size, numbers.Real):
+        raise ValueError(f"voxel_size must be a number of metres, got {voxel_size!r}")
+    if not (math.isfinite(float(voxel_size)) and float(voxel_size) > 0):
+        raise ValueError(f"voxel_size must be finite and > 0 metres, got {voxel_size}")
+
+
+def check_viewpoint(viewpoint: Any) -> np.ndarray:
+    """The sensor origin as a finite (3,) float array; ``ValueError`` otherwise."""
+    try:
+        point = np.asarray(viewpoint, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"viewpoint must be 3 numbers (metres), got {viewpoint!r}") from error
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ValueError(f"viewpoint must be 3 finite numbers (metres), got {viewpoint!r}")
+    return point
+
+
 def prepare(
     cloud: PointCloud, argument: str, voxel_size: float, downsample: bool, viewpoint: Any
 ) -> PointCloud:
@@ -74,11 +95,24 @@ def prepare(
     -------
     PointCloud
         A cloud with normals.
+
+    Raises
+    ------
+    ValueError
+        For an empty cloud, a voxel size that is not finite and positive or too fine for
+        the cloud's extent, or a cloud in which no normal can be fitted (coincident or
+        collinear points).
     """
     if len(cloud) == 0:
         raise ValueError(f"{argument} is empty: at least 1 finite point is needed")
+    check_voxel_size(voxel_size)
     if downsample:
-        cloud = voxel_downsample(cloud, voxel_size / 2)
+        try:
+            cloud = voxel_downsample(cloud, voxel_size / 2)
+        except ValueError as error:  # the core names half the voxel size: say why
+            raise ValueError(
+                f"{argument}: downsampling to half of voxel_size = {voxel_size} m: {error}"
+            ) from error
     if not cloud.has_normals:
         cloud = estimate_normals(cloud, radius=2 * voxel_size, viewpoint=viewpoint)
     return cloud
@@ -121,15 +155,32 @@ def align(
     Raises
     ------
     ValueError
-        For an empty cloud or an array of the wrong shape, an unknown setting in
-        ``overrides``, or a setting out of its range (the message names it).
+        For an empty cloud, an array of the wrong shape or dtype (integers are refused),
+        non-finite coordinates, an unknown setting in ``overrides``, a setting out of its
+        range, or a grid over ``max_voxels`` (refused before it is allocated); the message
+        names the argument or the limit.
+    TypeError
+        For ``params`` that is not an :class:`AlignParams`, or a setting of the wrong type.
+
+    Notes
+    -----
+    Degenerate input is not an error when it has a defined answer: a model of one point
+    or of coincident points returns ``converged = False``; docs/reliability.md lists each
+    case. ``max_seconds`` counts from the start of the C++ alignment, after downsampling
+    and normal estimation.
     """
+    if params is not None and not isinstance(params, AlignParams):
+        raise TypeError(f"params must be an AlignParams, got {type(params).__name__}")
     # A copy: overrides never change the caller's settings.
     settings = copy.copy(params) if params is not None else AlignParams()
     for name, value in overrides.items():
         if not hasattr(settings, name) or name.startswith("_"):
             raise ValueError(f"unknown alignment setting {name!r}")
-        setattr(settings, name, value)
+        try:
+            setattr(settings, name, value)
+        except TypeError as error:
+            raise TypeError(f"alignment setting {name!r}: {error}") from error
+    viewpoint = check_viewpoint(viewpoint)
     model_cloud = prepare(
         as_cloud(model, "model"), "model", settings.voxel_size, downsample, viewpoint
     )

@@ -123,6 +123,14 @@ def pose_error(T: np.ndarray) -> tuple[float, float]:
 # --------------------------------------------------------------------------- settings
 
 
+def _check_positive(params: Any, names: tuple[str, ...]) -> None:
+    """Refuse settings ``names`` of ``params`` that are not > 0 (ValueError)."""
+    for name in names:
+        value = getattr(params, name)
+        if not value > 0:  # also refuses NaN; inf turns a limit off
+            raise ValueError(f"{name} must be > 0, got {value}")
+
+
 @dataclass
 class ServoParams:
     """Settings of :class:`SpectralServo`.
@@ -191,6 +199,13 @@ class ServoParams:
         between phase-correlation peaks as the view changes (measured: up to 0.6 m between
         steps in runs that then converged), and the speed limits bound the motion. Above 1
         the watchdog is never armed.
+    max_translation : float
+        Largest translation, per axis, that one registration seeks from its initial guess,
+        m (``AlignParams.max_translation``): the phase-correlation grid then holds the two
+        views grown by this instead of by the reference view's radius (about 0.5 m above
+        the table), a grid 3-8 times smaller. Must exceed the displacement of the view's
+        centroid, which a camera rotation adds to (30 degrees at 0.55 m: 0.28 m). 0: the
+        paper's unbounded grid. Measured in docs/servoing.md.
     max_depth : float
         Points farther than this along the optical axis are ignored (both clouds), m. The
         registration grid spans both clouds: a camera turned toward the horizon would
@@ -220,6 +235,7 @@ class ServoParams:
     jump_limit_translation: float = 0.1
     jump_limit_rotation: float = math.radians(10.0)
     watchdog_fitness: float = 0.9
+    max_translation: float = 0.3
     max_depth: float = 1.5
     min_points: int = 500
     align_overrides: dict[str, Any] = field(default_factory=dict)
@@ -227,23 +243,26 @@ class ServoParams:
     def __post_init__(self) -> None:
         if self.mode not in ("iteration", "pose"):
             raise ValueError(f"mode must be 'iteration' or 'pose', got {self.mode!r}")
-        positive = (
-            "voxel_size",
-            "max_rotation_step",
-            "lambda_t",
-            "lambda_r",
-            "translation_tolerance",
-            "rotation_tolerance",
-            "max_linear_speed",
-            "max_angular_speed",
-            "jump_limit_translation",
-            "jump_limit_rotation",
-            "max_depth",
+        _check_positive(
+            self,
+            (
+                "voxel_size",
+                "max_rotation_step",
+                "lambda_t",
+                "lambda_r",
+                "translation_tolerance",
+                "rotation_tolerance",
+                "max_linear_speed",
+                "max_angular_speed",
+                "jump_limit_translation",
+                "jump_limit_rotation",
+                "max_depth",
+            ),
         )
-        for name in positive:
-            value = getattr(self, name)
-            if not value > 0:  # also refuses NaN; inf turns a limit off
-                raise ValueError(f"{name} must be > 0, got {value}")
+        if not (self.max_translation >= 0 and math.isfinite(self.max_translation)):
+            raise ValueError(
+                f"max_translation must be >= 0 m (0: unbounded), got {self.max_translation}"
+            )
         if not self.step_tolerance >= 0:
             raise ValueError(f"step_tolerance must be >= 0, got {self.step_tolerance}")
         if not 0.0 <= self.min_fitness <= 1.0:
@@ -264,6 +283,8 @@ class ServoParams:
         params.bandwidth = self.bandwidth
         params.max_rotation_step = self.max_rotation_step
         params.initial_guess = np.eye(4)
+        unbounded = self.mode == "pose" and self.global_search
+        params.max_translation = 0.0 if unbounded else self.max_translation
         if self.mode == "iteration":
             params.global_search = False
             params.max_iterations = 1
@@ -405,6 +426,59 @@ class ServoLog:
 # --------------------------------------------------------------------------- controller
 
 
+def _saturated_twist(
+    translation: np.ndarray, rotvec: np.ndarray, law: Any
+) -> tuple[np.ndarray, float]:
+    """``(lambda_t t, lambda_r theta u)`` scaled down as a whole to the speed limits, and
+    the scale; ``law`` has the gains ``lambda_t``, ``lambda_r`` (1/s) and the limits
+    ``max_linear_speed`` (m/s), ``max_angular_speed`` (rad/s) (:meth:`SpectralServo.twist`)."""
+    v = law.lambda_t * np.asarray(translation, dtype=float)
+    omega = law.lambda_r * np.asarray(rotvec, dtype=float)
+    scale = 1.0
+    speed, turn = float(np.linalg.norm(v)), float(np.linalg.norm(omega))
+    if speed > law.max_linear_speed:
+        scale = min(scale, law.max_linear_speed / speed)
+    if turn > law.max_angular_speed:
+        scale = min(scale, law.max_angular_speed / turn)
+    return np.concatenate([v, omega]) * scale, scale
+
+
+def _empty_record(step: int, points: int) -> ServoRecord:
+    """The record of a step before anything is measured: no estimate, zero twist."""
+    return ServoRecord(
+        step=step,
+        time=math.nan,
+        points=points,
+        T_current_desired=np.eye(4),
+        translation_error=math.nan,
+        rotation_error=math.nan,
+        translation_cost=math.nan,
+        rotation_cost=math.nan,
+        translation_step=math.nan,
+        rotation_gradient=math.nan,
+        iterations=0,
+        fitness=math.nan,
+        twist=np.zeros(6),
+        saturation=1.0,
+        seconds=0.0,
+        status=ServoStatus(),
+    )
+
+
+def _too_few_points(count: int, message: str) -> ServoStatus:
+    """The stop for an input with ``count`` usable points (or pixels), below the minimum."""
+    return ServoStatus("stopped", "empty_cloud" if count == 0 else "too_few_points", message)
+
+
+def _converged_status(translation: float, rotation: float) -> ServoStatus:
+    """Converged, with the estimated error (m, rad) in the message."""
+    return ServoStatus(
+        "converged",
+        "converged",
+        f"estimated error {1000 * translation:.2f} mm, {math.degrees(rotation):.3f} deg",
+    )
+
+
 class SpectralServo:
     """The servo controller: from the current cloud to a camera twist.
 
@@ -499,16 +573,7 @@ class SpectralServo:
             The factor in (0, 1] that was applied.
         """
         T = np.asarray(T_current_desired, dtype=float)
-        p = self.params
-        v = p.lambda_t * T[:3, 3]
-        omega = p.lambda_r * rotation_vector(T[:3, :3])
-        scale = 1.0
-        speed, turn = float(np.linalg.norm(v)), float(np.linalg.norm(omega))
-        if speed > p.max_linear_speed:
-            scale = min(scale, p.max_linear_speed / speed)
-        if turn > p.max_angular_speed:
-            scale = min(scale, p.max_angular_speed / turn)
-        return np.concatenate([v, omega]) * scale, scale
+        return _saturated_twist(T[:3, 3], rotation_vector(T[:3, :3]), self.params)
 
     def step(
         self, current: CloudLike, T_previous_current: np.ndarray | None = None
@@ -546,31 +611,11 @@ class SpectralServo:
         p = self.params
         cloud = self._crop(as_cloud(current, "current"))
         points = len(cloud)
-        record = ServoRecord(
-            step=self._steps,
-            time=math.nan,
-            points=points,
-            T_current_desired=np.eye(4),
-            translation_error=math.nan,
-            rotation_error=math.nan,
-            translation_cost=math.nan,
-            rotation_cost=math.nan,
-            translation_step=math.nan,
-            rotation_gradient=math.nan,
-            iterations=0,
-            fitness=math.nan,
-            twist=np.zeros(6),
-            saturation=1.0,
-            seconds=0.0,
-            status=ServoStatus(),
-        )
+        record = _empty_record(self._steps, points)
         self._steps += 1
         if points == 0 or points < p.min_points:
-            reason = "empty_cloud" if points == 0 else "too_few_points"
-            record.status = ServoStatus(
-                "stopped",
-                reason,
-                f"the current cloud has {points} points (min_points {p.min_points})",
+            record.status = _too_few_points(
+                points, f"the current cloud has {points} points (min_points {p.min_points})"
             )
             record.seconds = time.perf_counter() - start
             return record.twist, record.status, record
@@ -600,11 +645,7 @@ class SpectralServo:
         self._armed = self._armed or record.fitness >= p.watchdog_fitness
 
         if self._converged(record):
-            record.status = ServoStatus(
-                "converged",
-                "converged",
-                f"estimated error {1000 * t_err:.2f} mm, {math.degrees(r_err):.3f} deg",
-            )
+            record.status = _converged_status(t_err, r_err)
         else:
             record.twist, record.saturation = self.twist(T)
         record.seconds = time.perf_counter() - start
@@ -760,7 +801,7 @@ def run_servo(
 
 
 #: The start-pose sets of the servo experiment (benchmarks/servo_experiment.py) and of
-#: ``spectral-vs servo-demo``: joint perturbation (rad) and the accepted camera displacement
+#: ``spectral-vs servo-sim``: joint perturbation (rad) and the accepted camera displacement
 #: from the reference pose (``random_start``'s ranges, m and degrees).
 START_SETS: dict[str, dict[str, Any]] = {
     "moderate": {"joint_range": 0.35, "translation": (0.0, 0.2), "rotation_deg": (0.0, 30.0)},
@@ -871,6 +912,64 @@ def random_start(
         if within and beyond:
             return q, t, r
     raise RuntimeError(f"no start pose in the ranges after {max_tries} draws")
+
+
+def start_poses(
+    kinematics: Kinematics,
+    set_name: str,
+    count: int,
+    seed: int = 0,
+    q_reference: Any = None,
+) -> list[tuple[np.ndarray, float, float]]:
+    """The ``count`` seeded start configurations of one of :data:`START_SETS`.
+
+    The same ``(set_name, seed)`` always gives the same sequence, and the first ``k`` of
+    ``count`` starts are the ``k`` starts of a shorter request: the experiment, the
+    command line and the benchmarks share their start poses.
+
+    Parameters
+    ----------
+    kinematics : Kinematics
+        Camera kinematics of the robot.
+    set_name : str
+        A key of :data:`START_SETS` (``"moderate"`` or ``"large"``).
+    count : int
+        Number of starts, >= 1.
+    seed : int
+        Seed of the draws.
+    q_reference : array_like, optional
+        Configuration of the reference pose, rad; ``sim.HOME_Q`` by default.
+
+    Returns
+    -------
+    list of (q, translation, rotation)
+        Start configuration (rad) and its camera displacement from the reference pose
+        (m, rad), as :func:`random_start` returns them.
+    """
+    if set_name not in START_SETS:
+        raise ValueError(f"set_name must be one of {sorted(START_SETS)}, got {set_name!r}")
+    if count < 1:
+        raise ValueError(f"count must be >= 1, got {count}")
+    if q_reference is None:
+        from spectral_vs.sim.robot import HOME_Q
+
+        q_reference = HOME_Q
+    spec = START_SETS[set_name]
+    rng = np.random.default_rng([seed, list(START_SETS).index(set_name)])
+    return [
+        random_start(
+            kinematics,
+            np.asarray(q_reference, dtype=float),
+            rng,
+            joint_range=spec["joint_range"],
+            translation_range=spec["translation"],
+            rotation_range=(
+                math.radians(spec["rotation_deg"][0]),
+                math.radians(spec["rotation_deg"][1]),
+            ),
+        )
+        for _ in range(count)
+    ]
 
 
 def record_dict(record: ServoRecord) -> dict[str, Any]:
@@ -1072,5 +1171,6 @@ __all__ = [
     "rotation_matrix",
     "rotation_vector",
     "run_servo",
+    "start_poses",
     "true_errors",
 ]

@@ -87,6 +87,37 @@ TEST(Align, GlobalSearchRecoversAHalfTurn) {
   EXPECT_LT(translation_error_mm(result.T_scene_model, c.T_scene_model), 2.0);
 }
 
+TEST(Align, BoundedTranslationAgreesWithinItsBound) {
+  // Offsets of up to 0.1 m per axis: a bound of 0.15 m changes the grid, not the answer.
+  const Case c = make_case(8.0, 4);
+  AlignParams params;
+  params.global_search = false;
+  const AlignResult unbounded = align(c.model, c.scene, params);
+  params.max_translation = 0.15;
+  const AlignResult bounded = align(c.model, c.scene, params);
+  EXPECT_LT(rotation_error_degrees(bounded.T_scene_model, c.T_scene_model), 1.0);
+  EXPECT_LT(translation_error_mm(bounded.T_scene_model, c.T_scene_model), 2.0);
+  EXPECT_LT(rotation_error_degrees(bounded.T_scene_model, unbounded.T_scene_model), 0.2);
+  EXPECT_LT(translation_error_mm(bounded.T_scene_model, unbounded.T_scene_model), 0.5);
+}
+
+TEST(Align, BoundedTranslationSeeksNoFartherThanItsBound) {
+  // The scene is the model moved 0.12 m along x: one full translation step finds it
+  // unbounded; bounded to 0.05 m, the step stays within the bound (per axis).
+  std::mt19937 rng(5);
+  const PointCloud model = box_with_ball(6000, rng);
+  const PointCloud scene = model.transformed(test::translation(Eigen::Vector3d(0.12, 0.0, 0.0)));
+  AlignParams params;
+  params.global_search = false;
+  params.max_iterations = 1;
+  params.translation_gain = 1.0;
+  const Eigen::Vector3d found = align(model, scene, params).T_scene_model.topRightCorner<3, 1>();
+  EXPECT_NEAR(found.x(), 0.12, 0.002);
+  params.max_translation = 0.05;
+  const Eigen::Vector3d bounded = align(model, scene, params).T_scene_model.topRightCorner<3, 1>();
+  EXPECT_LE(bounded.cwiseAbs().maxCoeff(), 0.05 + params.voxel_size);
+}
+
 TEST(Align, RefusesBadInput) {
   const Case c = make_case(10.0, 3);
   EXPECT_THROW(align(PointCloud(), c.scene), std::invalid_argument);
@@ -99,6 +130,9 @@ TEST(Align, RefusesBadInput) {
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
   params.initial_guess(3, 0) = 1.0;
+  EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
+  params = AlignParams{};
+  params.max_translation = -0.1;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
   params.limits.max_voxels = 1000;

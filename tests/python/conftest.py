@@ -1,9 +1,13 @@
-"""Shared fixtures: the real scans beside the project and seeded random data."""
+"""Shared fixtures: the real scans beside the project, seeded random data and the
+simulated iiwa moved off its reference pose."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -39,3 +43,25 @@ def box_and_sphere(rng: np.random.Generator, samples: int = 6000) -> tuple[np.nd
     n_box = np.zeros_like(u)
     n_box[rows, axis] = u[rows, axis]
     return np.vstack([p_sphere, p_box]), np.vstack([n_sphere, n_box])
+
+
+@contextmanager
+def iiwa_small_start(capture: Callable[[Any], Any]) -> Iterator[tuple[Any, Any, np.ndarray]]:
+    """The simulated iiwa (kinematic mode, 160 x 120 images) with every joint moved from
+    HOME_Q by up to 0.05 rad, seeded (32 mm and 3.9 degrees of camera displacement).
+
+    Yields ``(robot, reference, T_world_reference)``: ``capture(robot)`` and the camera
+    pose, both taken at HOME_Q before the move. Skips without pybullet.
+    """
+    pytest.importorskip("pybullet")
+    from spectral_vs import sim
+
+    params = sim.SimParams(
+        mode="kinematic", camera=sim.CameraParams(intrinsics=sim.CameraIntrinsics(160, 120))
+    )
+    with sim.PyBulletRobot(params) as robot:
+        reference = capture(robot)
+        T_world_reference = robot.camera_pose()
+        q = np.asarray(sim.HOME_Q) + np.random.default_rng(1).uniform(-0.05, 0.05, 7)
+        robot.reset_joint_positions(q)
+        yield robot, reference, T_world_reference

@@ -4,11 +4,13 @@ and one short servo run of the simulated iiwa (PyBullet, kinematic mode)."""
 
 from __future__ import annotations
 
+import json
 import math
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import iiwa_small_start
 
 import spectral_vs as svs
 from spectral_vs.servo import (
@@ -393,17 +395,8 @@ def test_pybullet_servo_reaches_the_reference_pose():
     """From HOME_Q with every joint moved by up to 0.05 rad (here 32 mm and 3.9 degrees of
     camera displacement), the arm servos back to within 5 mm and 1 degree of the camera
     pose where the reference was captured (ground truth: PyBullet's link state)."""
-    pytest.importorskip("pybullet")
-    from spectral_vs import sim
-
-    params = sim.SimParams(
-        mode="kinematic", camera=sim.CameraParams(intrinsics=sim.CameraIntrinsics(160, 120))
-    )
-    with sim.PyBulletRobot(params) as robot:
-        reference = robot.capture()
-        T_world_reference = robot.camera_pose()
-        q = np.asarray(sim.HOME_Q) + np.random.default_rng(1).uniform(-0.05, 0.05, 7)
-        robot.reset_joint_positions(q)
+    with iiwa_small_start(lambda robot: robot.capture()) as start:
+        robot, reference, T_world_reference = start
         start_mm, start_deg = errors_mm_deg(robot.camera_pose(), T_world_reference)
         assert start_mm > 20 and start_deg > 3
         servo = SpectralServo(reference, ServoParams())
@@ -420,9 +413,10 @@ def test_pybullet_servo_reaches_the_reference_pose():
     assert abs(1000 * log.records[-1].translation_error - true_mm) < 3.0
 
 
-def test_servo_demo_command_prints_steps_and_the_final_error(capsys, tmp_path):
+def test_servo_sim_command_prints_steps_and_the_final_error(capsys, tmp_path):
     """Three steps cannot reach the reference from a moderate start: exit code 1, with a
-    line per step and the final error against the simulation's ground truth."""
+    line per step and the final error against the simulation's ground truth. The old
+    name servo-demo and --output still work."""
     pytest.importorskip("pybullet")
     from spectral_vs.cli import main
 
@@ -430,7 +424,51 @@ def test_servo_demo_command_prints_steps_and_the_final_error(capsys, tmp_path):
     out = capsys.readouterr().out
     assert code == 1
     assert out.count("\nstep ") == 3
-    assert "stopped (max_steps" in out and "TOO LARGE" in out
+    assert "max_steps after 3 steps" in out and "TOO LARGE" in out
     start_mm = float(out.split("camera ")[1].split(" mm")[0])
-    assert 100 < start_mm < 200  # seed 0 of the moderate set: 141 mm, 26.6 degrees
+    assert 0 < start_mm < 200  # a start of the moderate set
     assert not any(tmp_path.iterdir())
+
+
+def test_servo_sim_json_reports_every_start(capfd, tmp_path):
+    """--starts N --json: one entry per start, the starts of servo.start_poses, errors in
+    mm and degrees measured by the simulation. Standard output, read at the file
+    descriptor (PyBullet's C code prints there), holds the JSON alone."""
+    pytest.importorskip("pybullet")
+    from spectral_vs import servo as servo_lib
+    from spectral_vs import sim
+    from spectral_vs.cli import main
+
+    argv = ["servo-sim", "--starts", "2", "--seed", "4", "--set", "large", "--max-steps", "2"]
+    code = main([*argv, "--no-figures", "--json", "--out", str(tmp_path)])
+    summary = json.loads(capfd.readouterr().out)
+    assert code == 1  # two steps do not converge
+    assert summary["set"] == "large" and summary["successes"] == 0
+    with sim.PyBulletRobot(sim.SimParams()) as robot:
+        expected = servo_lib.start_poses(robot.kinematics, "large", 2, seed=4)
+    assert [run["index"] for run in summary["starts"]] == [0, 1]
+    for run, (_, t, r) in zip(summary["starts"], expected, strict=True):
+        assert run["start_mm"] == pytest.approx(1000 * t, abs=1e-6)
+        assert run["start_deg"] == pytest.approx(np.degrees(r), abs=1e-6)
+        assert 200 <= run["start_mm"] < 450 or 30 <= run["start_deg"] < 60
+        assert run["steps"] == 2 and run["reason"] == "max_steps" and not run["success"]
+        # Two steps of at most 0.1 m/s for 0.1 s: the camera is still far from the goal.
+        assert run["final_mm"] > run["start_mm"] - 25
+
+
+def test_start_poses_are_seeded_and_prefix_stable():
+    """The first k of n starts are the k starts of a shorter request; seeds differ."""
+    pytest.importorskip("pybullet")
+    from spectral_vs import servo as servo_lib
+    from spectral_vs import sim
+
+    with sim.PyBulletRobot(sim.SimParams()) as robot:
+        five = servo_lib.start_poses(robot.kinematics, "moderate", 5, seed=1)
+        two = servo_lib.start_poses(robot.kinematics, "moderate", 2, seed=1)
+        other = servo_lib.start_poses(robot.kinematics, "moderate", 2, seed=2)
+        with pytest.raises(ValueError, match="set_name"):
+            servo_lib.start_poses(robot.kinematics, "huge", 1)
+    for (q5, t5, _), (q2, t2, _) in zip(five[:2], two, strict=True):
+        assert np.array_equal(q5, q2) and t5 == t2
+    assert not np.array_equal(two[0][0], other[0][0])
+    assert all(t < 0.2 and np.degrees(r) < 30 for _, t, r in five)

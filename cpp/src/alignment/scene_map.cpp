@@ -69,6 +69,22 @@ std::uint32_t direction_mask(const Eigen::Vector3d& normal) {
 
 }  // namespace
 
+namespace {
+
+// ceil(length / voxel_size) as an int, refused over the limit before the conversion,
+// which is undefined beyond the range of int (a scene two million metres wide at 0.1 mm).
+int voxels_along(double length, double voxel_size, const GridLimits& limits) {
+  const double n = std::ceil(length / voxel_size);
+  const double limit = std::min(double(limits.max_voxels), double(kMaxGridIndex) / 2);
+  if (!(n <= limit)) {
+    fail("voxel_size: ", length, " m is ", n, " voxels of ", voxel_size, " m along an axis, over the limit of ",
+         limit, " voxels (max_voxels)");
+  }
+  return static_cast<int>(n);
+}
+
+}  // namespace
+
 SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
                    const GridLimits& limits)
     : scene_(&scene) {
@@ -76,7 +92,7 @@ SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double v
   spec_.resolution = voxel_size;
   spec_.origin = ((box.min() / voxel_size).array().floor() - 2.0).matrix() * voxel_size;
   for (int axis = 0; axis < 3; ++axis) {
-    spec_.dims[axis] = static_cast<int>(std::ceil((box.max()[axis] - spec_.origin[axis]) / voxel_size)) + 3;
+    spec_.dims[axis] = voxels_along(box.max()[axis] - spec_.origin[axis], voxel_size, limits) + 3;
   }
   if (spec_.voxel_count() > limits.max_voxels) {
     fail("voxel_size: the scene spans ", spec_.dims.transpose(), " voxels at ", voxel_size,
@@ -147,7 +163,7 @@ GridSpec window_spec(double half_width, double voxel_size, const GridLimits& lim
   GridSpec spec;
   spec.resolution = voxel_size;
   // The window plus one voxel on each side, so a shift by the margin stays unaliased.
-  const int n = fft_friendly_size(static_cast<int>(std::ceil(2.0 * half_width / voxel_size)) + 3);
+  const int n = fft_friendly_size(voxels_along(2.0 * half_width, voxel_size, limits) + 3);
   spec.dims = Eigen::Vector3i::Constant(n);
   if (spec.voxel_count() > limits.max_voxels) {
     fail("voxel_size: a window of ", n, "^3 voxels at ", voxel_size, " m exceeds the limit of ",
@@ -166,7 +182,7 @@ TranslationWindow::TranslationWindow(const SceneMap& scene, double reach, double
       limits_(limits),
       half_width_(reach + margin),
       margin_(margin),
-      max_shift_(Eigen::Vector3i::Constant(static_cast<int>(std::ceil(margin / voxel_size)))),
+      max_shift_(Eigen::Vector3i::Constant(voxels_along(margin, voxel_size, limits))),
       spec_(window_spec(half_width_, voxel_size, limits)),
       phase_(spec_, params) {
   place(centre);
@@ -216,19 +232,16 @@ double TranslationWindow::overlap(const Points& moved) {
 
 namespace {
 
-GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
-                    const GridLimits& limits) {
-  const Eigen::AlignedBox3d scene_box = bounding_box(scene.cloud());
-  const Eigen::AlignedBox3d hull = cube(start, reach);
-  GridSpec spec = make_grid_spec(hull, scene_box, voxel_size, limits);
-  Eigen::AlignedBox3d cover = scene_box;
-  cover.min().array() -= reach;
-  cover.max().array() += reach;
-  cover.extend(hull);
+// The grid over `cover`, with a voxel of room on each side, in FFT-friendly sizes of at
+// least `min_dims`.
+GridSpec covering_spec(const Eigen::AlignedBox3d& cover, const Eigen::Vector3i& min_dims, double voxel_size,
+                       const GridLimits& limits) {
+  GridSpec spec;
+  spec.resolution = voxel_size;
   const Eigen::Vector3d origin = ((cover.min() / voxel_size).array().floor() - 1.0).matrix() * voxel_size;
   for (int axis = 0; axis < 3; ++axis) {
-    const int needed = static_cast<int>(std::ceil((cover.max()[axis] - origin[axis]) / voxel_size)) + 2;
-    spec.dims[axis] = fft_friendly_size(std::max(spec.dims[axis], needed));
+    const int needed = voxels_along(cover.max()[axis] - origin[axis], voxel_size, limits) + 2;
+    spec.dims[axis] = fft_friendly_size(std::max(min_dims[axis], needed));
   }
   spec.origin = origin;
   if (spec.voxel_count() > limits.max_voxels) {
@@ -236,6 +249,27 @@ GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double 
          " m exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
   }
   return spec;
+}
+
+GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
+                    const GridLimits& limits) {
+  const Eigen::AlignedBox3d scene_box = bounding_box(scene.cloud());
+  const Eigen::AlignedBox3d hull = cube(start, reach);
+  const GridSpec minimum = make_grid_spec(hull, scene_box, voxel_size, limits);
+  Eigen::AlignedBox3d cover = scene_box;
+  cover.min().array() -= reach;
+  cover.max().array() += reach;
+  cover.extend(hull);
+  return covering_spec(cover, minimum.dims, voxel_size, limits);
+}
+
+GridSpec bounded_scene_spec(const SceneMap& scene, const Eigen::AlignedBox3d& model_box, double max_translation,
+                            double voxel_size, const GridLimits& limits) {
+  Eigen::AlignedBox3d cover = bounding_box(scene.cloud());
+  cover.extend(model_box);
+  cover.min().array() -= max_translation;
+  cover.max().array() += max_translation;
+  return covering_spec(cover, Eigen::Vector3i::Constant(2), voxel_size, limits);
 }
 
 }  // namespace
@@ -252,10 +286,23 @@ SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d&
   phase_.set_target(target_);
 }
 
+SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
+                                   double max_translation, double voxel_size, Occupancy occupancy,
+                                   const PhaseCorrelationParams& params, const GridLimits& limits)
+    : occupancy_(occupancy),
+      limits_(limits),
+      spec_(bounded_scene_spec(scene, model_box, max_translation, voxel_size, limits)),
+      phase_(spec_, params),
+      max_shift_(Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits))) {
+  target_ = voxelize(scene.cloud(), spec_, occupancy, limits);
+  target_energy_ = grid_energy(target_);
+  phase_.set_target(target_);
+}
+
 TranslationEstimate SceneTranslation::estimate(const Points& moved) {
   voxelize_into(moved, spec_, occupancy_, moving_, limits_);
   if (moving_.empty()) fail("initial_guess: the model falls outside the scene's grid");
-  return phase_.estimate(moving_);
+  return max_shift_ ? phase_.estimate(moving_, *max_shift_) : phase_.estimate(moving_);
 }
 
 double SceneTranslation::translation_cost() const {

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 namespace spectral_vs::detail {
@@ -89,6 +90,14 @@ public:
   SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
                    Occupancy occupancy, const PhaseCorrelationParams& params, const GridLimits& limits);
 
+  /// A bounded search: the grid holds the scene and the model's box where it starts,
+  /// both grown by `max_translation` metres per side, and only shifts up to that far
+  /// are sought. For two views of one scene (servoing) this grid is several times smaller
+  /// than one grown by the model's reach.
+  SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box, double max_translation,
+                   double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
+                   const GridLimits& limits);
+
   TranslationEstimate estimate(const Points& moved);
   double translation_cost() const;
   const GridSpec& spec() const { return spec_; }
@@ -100,6 +109,7 @@ private:
   PhaseCorrelation phase_;
   VoxelGrid target_, moving_;
   double target_energy_ = 0.0;
+  std::optional<Eigen::Vector3i> max_shift_;  // voxels; none: the whole grid
 };
 
 /// The scene without its support plane: the largest plane of points with one normal

@@ -44,6 +44,13 @@ KDL::Frame to_kdl(const urdf::Pose& pose) {
 KDL::Joint to_kdl(const urdf::Joint& joint) {
   const KDL::Frame F_parent_joint = to_kdl(joint.parent_to_joint_origin_transform);
   const KDL::Vector axis = F_parent_joint.M * KDL::Vector(joint.axis.x, joint.axis.y, joint.axis.z);
+  const double axis_length = std::sqrt(joint.axis.x * joint.axis.x + joint.axis.y * joint.axis.y +
+                                       joint.axis.z * joint.axis.z);
+  if (joint.type != urdf::Joint::FIXED && !(axis_length > 1e-9 && std::isfinite(axis_length))) {
+    // KDL would divide by the length: every pose and Jacobian would be NaN.
+    fail("urdf: joint '", joint.name, "' has a zero or non-finite axis (", joint.axis.x, " ",
+         joint.axis.y, " ", joint.axis.z, ")");
+  }
   switch (joint.type) {
     case urdf::Joint::FIXED:
       return KDL::Joint(joint.name, KDL::Joint::Fixed);
@@ -81,10 +88,15 @@ std::vector<urdf::JointConstSharedPtr> joints_between(const urdf::ModelInterface
   require_link(model, base, "base_link");
   auto link = require_link(model, tip, "tip_link");
   std::vector<urdf::JointConstSharedPtr> joints;
+  const std::size_t links = model.links_.size();
   while (link->name != base) {
     if (!link->parent_joint) fail("tip_link: '", tip, "' is not below base_link '", base, "'");
+    // urdfdom accepts a loop of links that does not reach the root: walking up it would
+    // never end.
+    if (joints.size() > links) fail("urdf: the links above '", tip, "' form a loop");
     joints.push_back(link->parent_joint);
     link = model.getLink(link->parent_joint->parent_link_name);
+    if (!link) fail("urdf: joint '", joints.back()->name, "' has no parent link");
   }
   std::reverse(joints.begin(), joints.end());
   return joints;
@@ -191,6 +203,17 @@ Kinematics Kinematics::from_urdf_string(const std::string& urdf_xml, const std::
   require_rigid_transform(T_tip_camera, "T_tip_camera");
   const urdf::ModelInterfaceSharedPtr urdf_model = urdf::parseURDF(urdf_xml);
   if (!urdf_model) fail("urdf: the XML is not a valid URDF (urdfdom could not parse it)");
+  // urdfdom links own their children: a loop of links would own itself and leak. The
+  // model is only read here, so its tree is cut on the way out, however that is.
+  struct CutTree {
+    urdf::ModelInterface& model;
+    ~CutTree() {
+      for (auto& [name, link] : model.links_) {
+        link->child_links.clear();
+        link->child_joints.clear();
+      }
+    }
+  } cut{*urdf_model};
 
   auto model = std::make_shared<Model>();
   model->base_link = base_link;

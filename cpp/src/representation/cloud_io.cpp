@@ -12,6 +12,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <sstream>
+#include <vector>
 
 namespace spectral_vs {
 
@@ -35,31 +38,191 @@ Format format_from_extension(const std::string& path) {
   fail("path: unsupported extension '", ext, "' of ", path, " (supported: .pcd, .ply)");
 }
 
+std::vector<std::string> split(const std::string& line) {
+  std::istringstream in(line);
+  std::vector<std::string> tokens;
+  for (std::string token; in >> token;) tokens.push_back(token);
+  return tokens;
+}
+
+// Text from a file for a message: printable ASCII (other bytes as '?'), at most `length`
+// characters, so that a corrupted file cannot put invalid UTF-8 into an exception (which
+// Python could not even decode).
+std::string printable(const std::string& text, std::size_t length) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size() && i < length; ++i) {
+    const unsigned char c = static_cast<unsigned char>(text[i]);
+    out += (c >= 32 && c < 127) ? static_cast<char>(c) : '?';
+  }
+  return text.size() > length ? out + "..." : out;
+}
+
+std::string in_quotes(const std::string& text) { return "'" + printable(text, 40) + "'"; }
+
+// A non-negative integer of a header line, or -1 for anything else.
+long long parse_count(const std::string& token) {
+  if (token.empty() || token.size() > 12 ||
+      !std::all_of(token.begin(), token.end(), [](unsigned char c) { return std::isdigit(c); })) {
+    return -1;
+  }
+  return std::stoll(token);
+}
+
+// A number of an ASCII data line as PCL reads it: decimal, nan or inf, nothing else.
+bool is_number(const std::string& token) {
+  const char* begin = token.c_str();
+  char* end = nullptr;
+  std::strtod(begin, &end);
+  return end != begin && *end == '\0';
+}
+
+// PCL's PCD reader trusts the header: a header that does not match the data can make it
+// read past its buffers (a crash) or return zeros for unparsable ASCII values. So the
+// whole structure is checked here first: field sizes and types, WIDTH x HEIGHT = POINTS,
+// the data's length against the file's (binary), the compressed block's sizes
+// (binary_compressed), and every value of every line (ascii).
+void check_pcd(const std::string& path) {
+  std::ifstream file(path, std::ios::binary);
+  if (!file) fail("path: cannot open ", path);
+  const auto bad = [&path](const auto&... why) {
+    fail("path: ", path, " is not a valid PCD file: ", why...);
+  };
+  std::vector<std::string> fields, sizes, types, counts;
+  long long width = -1, height = 1, points = -1;
+  std::string data;
+  bool versioned = false;
+  std::string line;
+  for (int lines = 0; data.empty(); ++lines) {
+    if (lines == 256 || !std::getline(file, line)) {
+      if (!versioned && fields.empty()) {
+        fail("path: ", path, " is not a PCD file (no VERSION or FIELDS header line)");
+      }
+      bad("the header ends without a DATA line");
+    }
+    const std::vector<std::string> tokens = split(line);
+    if (tokens.empty() || tokens[0][0] == '#') continue;
+    const std::string& key = tokens[0];
+    const std::vector<std::string> values(tokens.begin() + 1, tokens.end());
+    if (key == "VERSION") {
+      versioned = true;
+    } else if (key == "VIEWPOINT") {
+      if (values.size() != 7 || !std::all_of(values.begin(), values.end(), is_number)) {
+        bad("VIEWPOINT must be 7 numbers, got ", in_quotes(line));
+      }
+    } else if (key == "FIELDS" || key == "COLUMNS") {
+      fields = values;
+    } else if (key == "SIZE") {
+      sizes = values;
+    } else if (key == "TYPE") {
+      types = values;
+    } else if (key == "COUNT") {
+      counts = values;
+    } else if (key == "WIDTH" || key == "HEIGHT" || key == "POINTS") {
+      const long long value = values.size() == 1 ? parse_count(values[0]) : -1;
+      if (value < 0 || value > std::numeric_limits<std::uint32_t>::max()) {
+        bad(key, " must be a count, got ", in_quotes(line));
+      }
+      (key == "WIDTH" ? width : key == "HEIGHT" ? height : points) = value;
+    } else if (key == "DATA") {
+      if (values.size() != 1) bad(in_quotes(line));
+      data = values[0];
+    } else if (!versioned && fields.empty()) {
+      fail("path: ", path, " is not a PCD file (no VERSION or FIELDS header line)");
+    } else {
+      // PCL's reader ends the header at a line it does not know and reads on from there.
+      bad("unknown header line ", in_quotes(line));
+    }
+  }
+  if (fields.empty()) bad("no FIELDS");
+  if (counts.empty()) counts.assign(fields.size(), "1");
+  if (sizes.size() != fields.size() || types.size() != fields.size() || counts.size() != fields.size()) {
+    bad(fields.size(), " FIELDS but ", sizes.size(), " SIZE, ", types.size(), " TYPE and ", counts.size(),
+        " COUNT entries");
+  }
+  long long point_step = 0, values_per_point = 0;
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    const long long size = parse_count(sizes[i]);
+    const long long count = parse_count(counts[i]);
+    const std::string& type = types[i];
+    const bool valid_type = (type == "F" && (size == 4 || size == 8)) ||
+                            ((type == "I" || type == "U") && (size == 1 || size == 2 || size == 4 || size == 8));
+    if (!valid_type) bad("field ", in_quotes(fields[i]), " has TYPE ", in_quotes(type), " and SIZE ", in_quotes(sizes[i]));
+    if (count < 1 || count > 65536) bad("field ", in_quotes(fields[i]), " has COUNT ", in_quotes(counts[i]));
+    point_step += size * count;
+    values_per_point += count;
+  }
+  if (width < 0 || points < 0) bad("no WIDTH or no POINTS");
+  if (width * height != points) bad("WIDTH x HEIGHT = ", width, " x ", height, " but POINTS = ", points);
+
+  // The data after the header line.
+  const std::streamoff header_end = file.tellg();
+  file.seekg(0, std::ios::end);
+  const std::streamoff file_size = file.tellg();
+  const long long available = file_size - header_end;
+  if (data == "binary") {
+    if (available < points * point_step) {
+      fail("path: ", path, " is truncated: ", available, " bytes of data for ", points, " points of ",
+           point_step, " bytes");
+    }
+  } else if (data == "binary_compressed") {
+    if (points == 0) return;
+    std::uint32_t block[2] = {0, 0};
+    file.seekg(header_end);
+    if (available < 8 || !file.read(reinterpret_cast<char*>(block), sizeof(block))) {
+      fail("path: ", path, " is truncated: no compressed data block");
+    }
+    if (static_cast<long long>(block[1]) != points * point_step) {
+      bad("the compressed block holds ", block[1], " bytes, ", points, " points of ", point_step,
+          " bytes need ", points * point_step);
+    }
+    if (static_cast<long long>(block[0]) > available - 8 || block[0] == 0) {
+      fail("path: ", path, " is truncated: ", available - 8, " bytes of compressed data, the header of the "
+           "block says ", block[0]);
+    }
+  } else if (data == "ascii") {
+    file.clear();
+    file.seekg(header_end);
+    long long read = 0;
+    while (read < points && std::getline(file, line)) {
+      for (char& c : line) {
+        if (c == ',') c = ' ';
+      }
+      const std::vector<std::string> tokens = split(line);
+      if (tokens.empty()) continue;
+      if (static_cast<long long>(tokens.size()) != values_per_point) {
+        bad("point ", read, " has ", tokens.size(), " values, the header gives ", values_per_point);
+      }
+      for (const auto& token : tokens) {
+        if (!is_number(token)) bad("point ", read, " has a value ", in_quotes(token), " that is not a number");
+      }
+      ++read;
+    }
+    if (read < points) fail("path: ", path, " is truncated: ", read, " of ", points, " points");
+  } else {
+    bad("DATA must be ascii, binary or binary_compressed, got ", in_quotes(data));
+  }
+}
+
 // PCL's readers print to stderr and may misbehave on a file that is not a point
-// cloud, so the header is checked here first.
+// cloud, so the file is checked here first.
 void check_header(const std::string& path, Format format) {
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) {
     fail("path: no such file: ", path);
+  }
+  if (format == Format::pcd) {
+    check_pcd(path);
+    return;
   }
   std::ifstream file(path, std::ios::binary);
   if (!file) {
     fail("path: cannot open ", path);
   }
   std::string line;
-  if (format == Format::ply) {
-    std::getline(file, line);
-    if (line.rfind("ply", 0) != 0) {
-      fail("path: ", path, " is not a PLY file (first line is not 'ply')");
-    }
-    return;
+  std::getline(file, line);
+  if (line.rfind("ply", 0) != 0) {
+    fail("path: ", path, " is not a PLY file (first line is not 'ply')");
   }
-  for (int lines = 0; lines < 64 && std::getline(file, line); ++lines) {
-    if (line.empty() || line[0] == '#') continue;
-    if (line.rfind("VERSION", 0) == 0 || line.rfind("FIELDS", 0) == 0) return;
-    break;
-  }
-  fail("path: ", path, " is not a PCD file (no VERSION or FIELDS header line)");
 }
 
 const pcl::PCLPointField* find_field(const pcl::PCLPointCloud2& cloud, const char* name) {
@@ -83,13 +246,17 @@ double read_value(const std::uint8_t* at, std::uint8_t datatype) {
     case pcl::PCLPointField::UINT16: return read(std::uint16_t{});
     case pcl::PCLPointField::INT32: return read(std::int32_t{});
     case pcl::PCLPointField::UINT32: return read(std::uint32_t{});
+    case pcl::PCLPointField::INT64: return read(std::int64_t{});
+    case pcl::PCLPointField::UINT64: return read(std::uint64_t{});
     default: fail("point field of unsupported data type ", int(datatype));
   }
 }
 
 std::size_t field_size(std::uint8_t datatype) {
   switch (datatype) {
-    case pcl::PCLPointField::FLOAT64: return 8;
+    case pcl::PCLPointField::FLOAT64:
+    case pcl::PCLPointField::INT64:
+    case pcl::PCLPointField::UINT64: return 8;
     case pcl::PCLPointField::INT16:
     case pcl::PCLPointField::UINT16: return 2;
     case pcl::PCLPointField::INT8:
@@ -140,7 +307,7 @@ PointCloud load_cloud(const std::string& path, CloudFileInfo* info) {
       status = reader.read(path, cloud);
     }
   } catch (const std::exception& error) {
-    fail("path: cannot read ", path, ": ", error.what());
+    fail("path: cannot read ", path, ": ", printable(error.what(), 200));
   }
   if (status < 0) {
     fail("path: ", path, " could not be parsed as a point cloud");

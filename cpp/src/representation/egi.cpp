@@ -19,6 +19,10 @@ double grid_theta(int j, int bandwidth) { return M_PI * (2.0 * j + 1.0) / (4.0 *
 double grid_phi(int k, int bandwidth) { return M_PI * k / bandwidth; }
 
 Eigen::Vector2i egi_cell(const Eigen::Vector3d& normal, int bandwidth) {
+  require_bandwidth(bandwidth);
+  if (!normal.allFinite() || normal.norm() == 0.0) {
+    fail("normal must be finite and non-zero, got ", normal.transpose());
+  }
   const int size = 2 * bandwidth;
   const double theta = std::atan2(std::hypot(normal.x(), normal.y()), normal.z());
   double phi = std::atan2(normal.y(), normal.x());

@@ -42,6 +42,8 @@ Eigen::Vector3d PointCloud::centroid() const {
 }
 
 PointCloud PointCloud::transformed(const Transform& T_target_source) const {
+  // The invariant: a cloud holds finite points only.
+  if (!T_target_source.allFinite()) fail("T_target_source has non-finite entries");
   const Eigen::Matrix3d R = T_target_source.topLeftCorner<3, 3>();
   const Eigen::RowVector3d t = T_target_source.topRightCorner<3, 1>().transpose();
   PointCloud out;

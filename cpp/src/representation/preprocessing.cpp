@@ -16,12 +16,26 @@ using detail::fail;
 
 namespace {
 
-pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud) {
+// PCL works in float, whose step is 8 microns at 100 m but 6 cm at a million metres.
+// Clouds within kNearOrigin of the origin go in as they are; farther ones relative to a
+// point near them, so that precision follows the cloud's size, not its distance from the
+// origin.
+constexpr double kNearOrigin = 100.0;  // metres
+
+// The offset to subtract before PCL: zero near the origin, else the centroid, snapped to
+// a multiple of `snap` metres when snap > 0 (so that voxel boundaries stay in place).
+Eigen::Vector3d float_offset(const PointCloud& cloud, double snap) {
+  if (cloud.points().cwiseAbs().maxCoeff() <= kNearOrigin) return Eigen::Vector3d::Zero();
+  const Eigen::Vector3d centroid = cloud.centroid();
+  return snap > 0.0 ? Eigen::Vector3d((centroid / snap).array().round().matrix() * snap) : centroid;
+}
+
+pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud, const Eigen::Vector3d& offset) {
   auto out = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
   out->resize(cloud.size());
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     auto& p = (*out)[i];
-    p.getVector3fMap() = cloud.points().row(Eigen::Index(i)).transpose().cast<float>();
+    p.getVector3fMap() = (cloud.points().row(Eigen::Index(i)).transpose() - offset).cast<float>();
     if (cloud.has_normals()) {
       p.getNormalVector3fMap() = cloud.normals().row(Eigen::Index(i)).transpose().cast<float>();
     } else {
@@ -31,6 +45,9 @@ pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud) {
   }
   return out;
 }
+
+// PCL's leaf size is a float.
+constexpr double kMaxVoxelSize = 1e6;
 
 // PCL's VoxelGrid silently returns its input when the voxel indices would overflow
 // a 32-bit integer; refuse such a call instead of returning a wrong answer.
@@ -51,10 +68,12 @@ void check_voxel_count(const PointCloud& cloud, double voxel_size) {
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size) {
   require_non_empty(cloud, "cloud");
   detail::require_positive_finite(voxel_size, "voxel_size");
+  if (voxel_size > kMaxVoxelSize) fail("voxel_size must be <= ", kMaxVoxelSize, " m, got ", voxel_size);
   check_voxel_count(cloud, voxel_size);
 
+  const Eigen::Vector3d offset = float_offset(cloud, voxel_size);
   pcl::VoxelGrid<pcl::PointNormal> filter;
-  filter.setInputCloud(to_pcl(cloud));
+  filter.setInputCloud(to_pcl(cloud, offset));
   const auto leaf = static_cast<float>(voxel_size);
   filter.setLeafSize(leaf, leaf, leaf);
   filter.setDownsampleAllData(true);
@@ -70,7 +89,7 @@ PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size) {
       if (!(n.norm() > 1e-6)) continue;  // opposite normals cancelled: no direction left
       normals.row(kept) = n.normalized().transpose();
     }
-    points.row(kept) = p.getVector3fMap().cast<double>().transpose();
+    points.row(kept) = (p.getVector3fMap().cast<double>() + offset).transpose();
     ++kept;
   }
   points.conservativeResize(kept, Eigen::NoChange);
@@ -83,9 +102,11 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
   if (params.k_neighbors < 0) fail("k_neighbors must be >= 0, got ", params.k_neighbors);
   if (params.k_neighbors == 0) detail::require_positive_finite(params.radius, "radius");
   if (!params.viewpoint.allFinite()) fail("viewpoint must be finite");
-  if (params.threads < 1) fail("threads must be >= 1, got ", params.threads);
+  // PCL's OpenMP would try to start them all (100000 threads crashed the process).
+  if (params.threads < 1 || params.threads > 256) fail("threads must be in [1, 256], got ", params.threads);
 
-  auto input = to_pcl(cloud);
+  const Eigen::Vector3d centroid = cloud.centroid();
+  auto input = to_pcl(cloud, float_offset(cloud, 0.0));
   pcl::NormalEstimationOMP<pcl::PointNormal, pcl::Normal> estimator(
       static_cast<unsigned int>(params.threads));
   estimator.setInputCloud(input);
@@ -98,7 +119,6 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
   pcl::PointCloud<pcl::Normal> estimated;
   estimator.compute(estimated);
 
-  const Eigen::Vector3d centroid = cloud.centroid();
   Points points(static_cast<Eigen::Index>(cloud.size()), 3);
   Points normals(points.rows(), 3);
   Eigen::Index kept = 0;
@@ -115,8 +135,8 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
     ++kept;
   }
   if (kept == 0) {
-    fail("radius/k_neighbors: no point has enough neighbours (>= 3) for a normal; "
-         "radius = ", params.radius, " m, k_neighbors = ", params.k_neighbors);
+    fail("radius/k_neighbors: no point has enough neighbours for a normal (3 or more, not all "
+         "coincident or collinear); radius = ", params.radius, " m, k_neighbors = ", params.k_neighbors);
   }
   points.conservativeResize(kept, Eigen::NoChange);
   normals.conservativeResize(kept, Eigen::NoChange);

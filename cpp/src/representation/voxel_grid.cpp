@@ -15,7 +15,15 @@ std::size_t GridSpec::voxel_count() const {
 }
 
 Eigen::Vector3i GridSpec::index_of(const Eigen::Vector3d& p) const {
-  return ((p - origin) / resolution).array().floor().cast<int>();
+  // Clamped before the conversion, which is undefined beyond the range of int: a point
+  // a million metres off a millimetre grid is far outside it, not wrapped back in.
+  Eigen::Vector3i index;
+  for (int axis = 0; axis < 3; ++axis) {
+    const double v = std::floor((p[axis] - origin[axis]) / resolution);
+    const double limit = kMaxGridIndex;
+    index[axis] = v >= -limit ? (v <= limit ? static_cast<int>(v) : kMaxGridIndex) : -kMaxGridIndex;
+  }
+  return index;
 }
 
 bool GridSpec::contains(const Eigen::Vector3i& index) const {
@@ -33,6 +41,7 @@ constexpr int kFastLengths[] = {2,  4,  6,  8,   10,  12,  16,  20,  32,  36,  4
 }  // namespace
 
 int fft_friendly_size(int n) {
+  if (n > kMaxGridIndex) fail("n must be <= ", kMaxGridIndex, ", got ", n);
   for (const int length : kFastLengths) {
     if (length >= n) return length;
   }
@@ -81,7 +90,7 @@ GridSpec make_grid_spec(const Eigen::AlignedBox3d& box_a, const Eigen::AlignedBo
     const double a_voxels = std::floor(box_a.sizes()[axis] / resolution) + 1.0;
     const double b_voxels = std::floor(box_b.sizes()[axis] / resolution) + 1.0;
     const double needed = std::max(union_voxels, a_voxels + b_voxels + 1.0);
-    if (needed > double(limits.max_voxels)) {
+    if (needed > double(limits.max_voxels) || needed > double(kMaxGridIndex) / 2) {
       fail("resolution: ", resolution, " m needs ", needed, " voxels along axis ", axis,
            ", over the limit of ", limits.max_voxels, " voxels (GridLimits::max_voxels)");
     }

@@ -48,7 +48,10 @@ FftwArray<T> fftw_array(std::size_t count) {
 // n x n complex-to-real 2D transform, half spectrum (n / 2 + 1) along the last axis.
 fftw_plan inverse_plan(int n) {
   std::lock_guard<std::mutex> lock(fftw_double_planner_mutex());
-  static std::map<int, fftw_plan> plans;
+  // Never destroyed: a static map would free its nodes at exit and leave the plans
+  // unreachable (a leak report under LeakSanitizer), or be gone while a detached thread
+  // still searches.
+  static auto& plans = *new std::map<int, fftw_plan>;
   auto& plan = plans[n];
   if (!plan) {
     auto in = fftw_array<fftw_complex>(std::size_t(n) * (n / 2 + 1));

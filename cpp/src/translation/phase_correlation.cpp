@@ -393,7 +393,13 @@ PhaseCorrelation::PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationP
   if (!(params.subvoxel_band > 0.0 && params.subvoxel_band <= 0.5)) {
     fail("subvoxel_band must be in (0, 0.5] cycles per voxel, got ", params.subvoxel_band);
   }
-  if (params.threads < 1) fail("threads must be >= 1, got ", params.threads);
+  if (params.threads < 1 || params.threads > 256) fail("threads must be in [1, 256], got ", params.threads);
+  const double voxels = double(spec.dims.x()) * double(spec.dims.y()) * double(spec.dims.z());
+  if (voxels > double(params.limits.max_voxels)) {
+    fail("spec: a phase correlation grid of ", spec.dims.x(), " x ", spec.dims.y(), " x ", spec.dims.z(),
+         " voxels (about ", voxels * kPhaseCorrelationBytesPerVoxel / 1e9, " GB) exceeds the limit of ",
+         params.limits.max_voxels, " voxels (GridLimits::max_voxels)");
+  }
   impl_->spec = spec;
   impl_->params = params;
   impl_->make_plans();

@@ -6,7 +6,11 @@ loop written for it also drives a real robot.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import sys
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -92,6 +96,23 @@ class SimParams:
             raise ValueError("time_step, max_joint_speed and max_joint_torque must be > 0")
 
 
+@contextlib.contextmanager
+def _stdout_to_stderr() -> Iterator[None]:
+    """Send what C code writes to standard output to standard error meanwhile.
+
+    PyBullet's connect prints ``argv[0]=`` with C's printf, which would corrupt a
+    machine-readable output such as ``spectral-vs servo-sim --json``.
+    """
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def pose_matrix(position, quaternion) -> np.ndarray:
     """4 x 4 transform from a PyBullet position and (x, y, z, w) quaternion.
 
@@ -135,7 +156,8 @@ class PyBulletRobot:
 
     def __init__(self, params: SimParams | None = None) -> None:
         self.params = params if params is not None else SimParams()
-        self._client = BulletClient(connection_mode=pybullet.DIRECT)
+        with _stdout_to_stderr():
+            self._client = BulletClient(connection_mode=pybullet.DIRECT)
         self._client.setGravity(0.0, 0.0, -9.81)
         self._client.setTimeStep(self.params.time_step)
         self.objects: list[PlacedObject] = build_scene(self._client, self.params.scene)

@@ -34,6 +34,11 @@ struct AlignParams {
   double tolerance = 0.02;     ///< eps_g of eq. (17): stop when |translation step| in voxels
                                ///< plus |grad C| (normalised correlation per radian) < eps_g.
   int max_iterations = 100;    ///< Iterations of Algorithm 1 per run, >= 1.
+  /// Time budget of the whole alignment, seconds, >= 0 (0: none). Checked after every
+  /// iteration, hypothesis and refinement: past it, the best pose so far is returned with
+  /// converged = false and stop_reason = max_seconds (the one setting whose result depends
+  /// on the machine's speed).
+  double max_seconds = 0.0;
   Transform initial_guess = Transform::Identity();  ///< T_scene_model to start from.
   bool global_search = true;   ///< Start from the best rotations of the SO(3) search
                                ///< (beyond the paper) instead of the initial guess's.
@@ -49,6 +54,12 @@ struct AlignParams {
   double window_margin = 0.0;  ///< How far the model may move per window placement, metres:
                                ///< local windows are the model's reach plus this on each side.
                                ///< 0: the larger of 5 voxels and 2.5 search voxels.
+  double max_translation = 0.0;  ///< Without global search: the largest translation from the
+                                 ///< initial guess that is sought, metres, per axis. The grid
+                                 ///< then holds the scene and the model's start grown by this
+                                 ///< (not by the model's reach), all iterations run on it, and
+                                 ///< farther phase-correlation peaks are ignored: for two views
+                                 ///< of one scene, as in servoing. 0: unbounded (the paper).
   /// The sensor origin of a single-view scene, scene coordinates, metres: fitness then
   /// scores only the model's points facing it (what the view can show), which tells a
   /// pose from its flip. Unset for a scene seen from all sides.
@@ -61,12 +72,27 @@ struct AlignParams {
                                ///< the rotation (4 to 1/4 degree steps) for the best overlap
                                ///< of the model's voxels with the scene's, past the EGI's
                                ///< accuracy floor. Skipped for models sampled sparser than
-                               ///< 2 points per occupied voxel.
+                               ///< 2 points per occupied voxel. For a model whose EGI has a
+                               ///< flat axis (its smallest autocorrelation curvature under a
+                               ///< tenth of the largest: a mug's axis, its handle a few
+                               ///< percent of the normals), turns about that axis every 15
+                               ///< degrees are scored by the same overlap first.
   bool subvoxel = true;        ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;  ///< Voxel values (the paper: binary).
   EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
-  int threads = 1;             ///< Threads for FFTW and the SO(3) search, >= 1.
-  GridLimits limits = {};      ///< Refuse translation grids over this many voxels.
+  int threads = 1;             ///< Threads for FFTW and the SO(3) search, in [1, 256].
+  /// Memory cap: any grid over limits.max_voxels voxels (scene map, translation grids,
+  /// windows) is refused with std::invalid_argument before it is allocated. The largest
+  /// grids cost about 28 bytes per voxel (values, FFT buffers), so the default 2^27 voxels
+  /// bounds one grid at about 3.8 GB.
+  GridLimits limits = {};
+};
+
+/// Why `align` stopped.
+enum class AlignStopReason {
+  converged,       ///< The stop rule (eq. 17) held.
+  max_iterations,  ///< AlignParams::max_iterations ran out.
+  max_seconds,     ///< AlignParams::max_seconds ran out.
 };
 
 /// One iteration of Algorithm 1, recorded after its update.
@@ -84,7 +110,9 @@ struct AlignIteration {
 /// Outcome of `align`.
 struct AlignResult {
   Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
-  bool converged = false;      ///< The stop rule (eq. 17) held before max_iterations.
+  bool converged = false;      ///< The stop rule (eq. 17) held before max_iterations
+                               ///< (and, with global search, all runs finished in time).
+  AlignStopReason stop_reason = AlignStopReason::max_iterations;  ///< Why it stopped.
   int iterations = 0;          ///< Iterations of Algorithm 1 in the kept run.
   /// Fraction of the model's occupied voxels that lie within one voxel of scene points
   /// with a normal within about 50 degrees of the model's, at the final pose, in [0, 1]:
@@ -106,8 +134,9 @@ struct AlignResult {
 /// the scene. Both clouds need normals. Rotation is about the model's centroid.
 /// @throws std::invalid_argument for an empty cloud, missing normals, non-finite or
 ///         out-of-range parameters, an initial guess that is not a rigid transform, or a
-///         translation grid over `params.limits`. Not converging is not an error: it
-///         returns converged = false.
+///         grid over `params.limits` (refused before it is allocated). Not converging,
+///         or running out of max_seconds, is not an error: it returns converged = false
+///         and the stop_reason.
 AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignParams& params = {});
 
 }  // namespace spectral_vs

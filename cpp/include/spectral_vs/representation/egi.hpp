@@ -23,6 +23,7 @@ double grid_phi(int k, int bandwidth);
 /// Cell of the grid node nearest to unit vector n: j = floor(theta * 2B / pi)
 /// (clamped to 2B-1), k = round(phi * B / pi) mod 2B, with theta in [0, pi] and
 /// phi = atan2(n_y, n_x) in [0, 2 pi).
+/// @throws std::invalid_argument for an invalid bandwidth or a zero or non-finite normal.
 Eigen::Vector2i egi_cell(const Eigen::Vector3d& normal, int bandwidth);
 
 /// Histogram of unit normals on the bandwidth-B grid: entry [j, k] counts the

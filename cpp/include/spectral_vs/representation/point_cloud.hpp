@@ -39,6 +39,7 @@ public:
   Eigen::Vector3d centroid() const;
 
   /// The cloud moved by `T_target_source` (points rotated and translated, normals rotated).
+  /// @throws std::invalid_argument if the transform has non-finite entries.
   PointCloud transformed(const Transform& T_target_source) const;
 
 private:

@@ -10,9 +10,11 @@ namespace spectral_vs {
 /// Replaces the points of each `voxel_size` cube by their centroid (PCL VoxelGrid).
 /// Normals, when present, are averaged and renormalised; a voxel whose normals
 /// cancel out is dropped.
-/// @param voxel_size edge of the cube in metres, finite and > 0.
+/// Precision does not depend on the distance from the origin: PCL's float arithmetic runs
+/// on coordinates relative to the cloud when it lies beyond 100 m of the origin.
+/// @param voxel_size edge of the cube in metres, finite, > 0 and <= 1e6.
 /// @throws std::invalid_argument for an empty cloud or a voxel size that is not
-///         finite, not positive, or so small that voxel indices would overflow.
+///         finite, not positive, over 1e6 m, or so small that voxel indices would overflow.
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size);
 
 /// How `estimate_normals` resolves the sign ambiguity of a fitted plane.
@@ -27,13 +29,15 @@ struct NormalEstimationParams {
   int k_neighbors = 0;               ///< If > 0, use this many nearest neighbours instead of a radius.
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();  ///< Sensor origin, metres.
   NormalOrientation orientation = NormalOrientation::toward_viewpoint;
-  int threads = 1;                   ///< OpenMP threads; results do not depend on it.
+  int threads = 1;                   ///< OpenMP threads in [1, 256]; results do not depend on it.
 };
 
 /// Fits a plane to each point's neighbourhood (PCL NormalEstimationOMP) and orients it.
-/// Points whose neighbourhood has fewer than 3 points get no normal and are dropped.
+/// Points whose neighbourhood has fewer than 3 points, or no plane (all coincident), get
+/// no normal and are dropped. (A neighbourhood of collinear points gets an arbitrary
+/// normal perpendicular to its line.)
 /// @throws std::invalid_argument for an empty cloud, non-finite or non-positive
-///         radius, negative k, or when no point gets a normal.
+///         radius, negative k, threads outside [1, 256], or when no point gets a normal.
 PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParams& params = {});
 
 }  // namespace spectral_vs

@@ -10,6 +10,10 @@
 
 namespace spectral_vs {
 
+/// Largest voxel index magnitude along an axis: `GridSpec::index_of` clamps to
+/// [-kMaxGridIndex, kMaxGridIndex], and no grid has more voxels than this along an axis.
+inline constexpr int kMaxGridIndex = 1 << 30;
+
 /// Where a grid lies and how fine it is. Voxel (i, j, k) covers
 /// origin + r * [i, i+1) x [j, j+1) x [k, k+1): the index of a point p is
 /// floor((p - origin) / r). (The paper's integer division truncates toward zero,
@@ -20,12 +24,15 @@ struct GridSpec {
   Eigen::Vector3i dims = Eigen::Vector3i::Zero();    ///< Voxels along x, y, z.
 
   std::size_t voxel_count() const;
-  /// floor((p - origin) / resolution), possibly outside [0, dims).
+  /// floor((p - origin) / resolution), possibly outside [0, dims), clamped to
+  /// +-kMaxGridIndex (-kMaxGridIndex for a NaN coordinate).
   Eigen::Vector3i index_of(const Eigen::Vector3d& p) const;
   bool contains(const Eigen::Vector3i& index) const;
 };
 
-/// Memory guard for every grid the library allocates.
+/// Memory guard for every grid the library allocates: a grid over the limit is refused
+/// with std::invalid_argument naming `max_voxels` before any of it is allocated. A voxel
+/// grid takes 4 bytes per voxel, a phase correlation on it about 20 more.
 struct GridLimits {
   std::size_t max_voxels = std::size_t{512} * 512 * 512;  ///< Refuse grids with more voxels.
 };
@@ -33,7 +40,8 @@ struct GridLimits {
 /// Smallest transform length n' >= n on which FFTW's estimated (deterministic) plans are
 /// fast: a measured table up to 1024 (lengths such as 16, 20, 32, 48, 64, 80, 100, 128;
 /// not 60 or 96, which took twice the time per voxel of 64 or 100), then the even
-/// products of 2, 3 and 5.
+/// products of 2, 3 and 5. Returns 2 for n <= 2.
+/// @throws std::invalid_argument for n > kMaxGridIndex.
 int fft_friendly_size(int n);
 
 /// A grid holding two clouds' bounding boxes in which the circular correlation of

@@ -15,8 +15,15 @@ struct PhaseCorrelationParams {
   /// phase plane over low frequencies (|f| < subvoxel_band cycles per voxel).
   bool subvoxel = true;
   double subvoxel_band = 0.25;  ///< Frequency band of the fit, cycles per voxel, in (0, 0.5].
-  int threads = 1;              ///< FFTW threads.
+  int threads = 1;              ///< FFTW threads, in [1, 256].
+  /// Grids over limits.max_voxels are refused before any buffer is allocated. The
+  /// transforms take about 20 bytes per voxel (kPhaseCorrelationBytesPerVoxel).
+  GridLimits limits = {};
 };
+
+/// Memory of a PhaseCorrelation per voxel of its grid, bytes (about): the float input and
+/// output and three complex half spectra.
+inline constexpr double kPhaseCorrelationBytesPerVoxel = 20.0;
 
 /// Translation that moves the moving grid onto the target: target(x) ~ moving(x - shift).
 struct TranslationEstimate {
@@ -34,7 +41,8 @@ struct TranslationEstimate {
 /// threads at once; distinct objects are independent.
 class PhaseCorrelation {
 public:
-  /// @throws std::invalid_argument for an invalid spec or params.
+  /// @throws std::invalid_argument for an invalid spec or params, or a grid over
+  ///         params.limits (before allocating).
   explicit PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationParams& params = {});
   ~PhaseCorrelation();
   PhaseCorrelation(PhaseCorrelation&&) noexcept;

@@ -1,0 +1,91 @@
+"""The peer registration methods of the benchmark (benchmarks/peers.py) and its smoke run.
+
+Needs the optional ``bench`` extra (open3d, small_gicp) and pybullet (the case meshes);
+skipped without them."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before an OpenMP runtime loads
+pytest.importorskip("open3d")
+pytest.importorskip("pybullet")  # the meshes come with pybullet_data
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import cases
+import peers
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def c1_case() -> cases.Case:
+    """A C-1 case: the full bunny onto a resampled, noisy copy, 10 degrees off."""
+    return cases.make_case(cases.CaseSpec("full", "bunny", 10.0, 0))
+
+
+def test_case_starts_ten_degrees_away(c1_case: cases.Case) -> None:
+    rotation, translation = cases.pose_error(c1_case, np.eye(4))
+    assert rotation == pytest.approx(10.0, abs=1e-6)
+    assert translation > 0.002  # the offset is the wrapper's job too (up to 50 mm)
+
+
+def test_point_to_plane_icp_recovers_ten_degrees(c1_case: cases.Case) -> None:
+    result = peers.register(
+        "o3d_icp",
+        c1_case.model_points,
+        c1_case.model_normals,
+        c1_case.scene_points,
+        c1_case.scene_normals,
+        voxel=0.008,
+        T_init=np.eye(4),
+    )
+    rotation, translation = cases.pose_error(c1_case, result.T_scene_model)
+    assert rotation < 1.0  # degrees
+    assert translation < 0.002  # metres
+    assert result.seconds > 0.0
+    R = result.T_scene_model[:3, :3]
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-9)
+
+
+def test_unknown_method_is_rejected(c1_case: cases.Case) -> None:
+    with pytest.raises(ValueError, match="method must be one of"):
+        peers.register(
+            "icp",
+            c1_case.model_points,
+            c1_case.model_normals,
+            c1_case.scene_points,
+            c1_case.scene_normals,
+        )
+
+
+def test_quick_run(tmp_path: Path) -> None:
+    pytest.importorskip("small_gicp")
+    output = tmp_path / "peers.json"
+    run = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "peers_benchmark.py"),
+            "--quick",
+            "--families",
+            "full",
+            "--output",
+            str(output),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    results = json.loads(output.read_text())
+    assert results["cases"] == 2  # 2 angles x 1 case
+    assert {r["method"] for r in results["records"]} == set(peers.METHODS)
+    assert all(r["time_s"] > 0.0 and r["rotation_error_deg"] >= 0.0 for r in results["records"])
+    assert len(results["determinism"]) == len(peers.METHODS)
