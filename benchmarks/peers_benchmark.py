@@ -19,6 +19,7 @@ Writes ``benchmarks/results/peers.json``, ``docs/figures/peers_success.png``,
     python benchmarks/peers_benchmark.py --quick     # smoke run (about 1 min), writes nothing
     python benchmarks/peers_benchmark.py --report-only    # figures and tables from the JSON
     python benchmarks/peers_benchmark.py --sweep-local-distance   # the peers' ICP distance
+    python benchmarks/peers_benchmark.py --methods ours,paper --replace-methods  # rerun ours
 
 Needs the ``bench`` extra (open3d, small_gicp), pybullet (cases) and matplotlib.
 """
@@ -501,6 +502,14 @@ def report(results: dict) -> None:
         f"methods each, voxel {1000 * results['voxel_size']:.0f} mm for all.",
         "Figures: " + ", ".join(f"`{w}`" for w in written) + ".",
     ]
+    for rerun in results.get("replaced", []):
+        lines.append(
+            "Rows of " + " and ".join(peers.TITLES[m] for m in rerun["methods"])
+            + f" replaced by a rerun on {', '.join(rerun['families'])}: commit {rerun['commit']} "
+            f"(compiled module sha256 {rerun['core_sha256']}); {rerun['date']}; load average "
+            f"{rerun['load_average'][0]:.1f} at the start, {rerun['load_average'][1]:.1f} at "
+            f"the end; {rerun['runtime_s'] / 60:.0f} min."
+        )  # fmt: skip
     if results.get("skipped"):
         lines.append(f"Skipped: {results['skipped']}.")
     blocks = [
@@ -566,6 +575,12 @@ def main() -> None:
         nargs="+",
         default=None,
         help="merge the JSONs of runs over different families into the results (or --output)",
+    )
+    parser.add_argument(
+        "--replace-methods",
+        action="store_true",
+        help="put this run's records of --methods in place of theirs in the results (or "
+        "--output), keeping every other method's (same cases and settings)",
     )
     args = parser.parse_args()
 
@@ -643,6 +658,10 @@ def main() -> None:
         "determinism_records": reruns,
         "records": records,
     }
+    if args.replace_methods and not args.quick:
+        output = args.output or RESULTS
+        finish(replace_methods(json.loads(output.read_text()), results), output)
+        return
     finish(with_summaries(results), args.output or (None if args.quick else RESULTS))
 
 
@@ -678,6 +697,43 @@ def merge(parts: list[dict]) -> dict:
         "cases_per_family": {f: n for p in parts for f, n in p["cases_per_family"].items()},
         "determinism_records": [r for p in parts for r in p["determinism_records"]],
         "records": [r for p in parts for r in p["records"]],
+    }
+    return with_summaries(merged)
+
+
+def replace_methods(base: dict, new: dict) -> dict:
+    """``base`` with the records of ``new``'s methods on ``new``'s families taken from
+    ``new`` (a rerun of some methods, e.g. ours after a change), every other record kept.
+    The runs must share the settings and, per family, the cases. ``replaced`` records
+    each such rerun (methods, families, command, build, date, load, runtime)."""
+    for key in ("threads", "settings", "voxel_size", "success"):
+        if base[key] != new[key]:
+            raise ValueError(f"the runs differ in {key}: not merged")
+    methods, families = set(new["methods"]), set(new["cases_per_family"])
+    for family in families:
+        old_cases = {r["case_id"] for r in base["records"] if r["family"] == family}
+        new_cases = {r["case_id"] for r in new["records"] if r["family"] == family}
+        if old_cases != new_cases:
+            raise ValueError(f"the runs differ in the cases of {family}: not merged")
+
+    def replaced(key: str) -> list[dict]:
+        kept = [r for r in base[key] if r["method"] not in methods or r["family"] not in families]
+        order = {c: i for i, c in enumerate(dict.fromkeys(r["case_id"] for r in base[key]))}
+        return sorted(
+            kept + new[key],
+            key=lambda r: (order.get(r["case_id"], len(order)), peers.METHODS.index(r["method"])),
+        )
+
+    rerun = {"methods": new["methods"], "families": list(new["cases_per_family"])}
+    rerun |= {"command": new["commands"][0]}
+    rerun |= {k: new[k] for k in ("date", "commit", "core_sha256", "load_average", "runtime_s")}
+    merged = dict(base)
+    merged |= {
+        "commands": base["commands"] + new["commands"],
+        "runtime_s": base["runtime_s"] + new["runtime_s"],
+        "replaced": [*base.get("replaced", []), rerun],
+        "determinism_records": replaced("determinism_records"),
+        "records": replaced("records"),
     }
     return with_summaries(merged)
 

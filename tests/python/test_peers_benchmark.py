@@ -89,3 +89,41 @@ def test_quick_run(tmp_path: Path) -> None:
     assert {r["method"] for r in results["records"]} == set(peers.METHODS)
     assert all(r["time_s"] > 0.0 and r["rotation_error_deg"] >= 0.0 for r in results["records"])
     assert len(results["determinism"]) == len(peers.METHODS)
+
+
+def _records(method: str, success: bool, case_ids: list[str]) -> list[dict]:
+    return [
+        {"case_id": c, "family": "full", "angle_deg": 30.0, "method": method,
+         "rotation_error_deg": 1.0 if success else 90.0, "translation_error_m": 0.001,
+         "success": success, "time_s": 0.1, "cpu_s": 0.1}
+        for c in case_ids
+    ]  # fmt: skip
+
+
+def _run(records: list[dict], methods: list[str], command: str) -> dict:
+    return {
+        "commands": [command], "date": "2026-01-01", "commit": "abc", "core_sha256": command,
+        "load_average": [1.0, 1.0], "runtime_s": 60.0, "threads": 1, "settings": {},
+        "voxel_size": 0.008, "success": {}, "methods": methods,
+        "cases_per_family": {"full": 2}, "determinism_records": [], "records": records,
+    }  # fmt: skip
+
+
+def test_replace_methods_keeps_every_other_methods_rows() -> None:
+    """A rerun of ours replaces ours' rows only: the peer's rows and success stay, ours'
+    success is the rerun's, and the rerun's build is recorded beside the first run's."""
+    import peers_benchmark
+
+    ids = ["full-bunny-a30-0", "full-bunny-a30-1"]
+    base = _run(_records("ours", False, ids) + _records("o3d_icp", True, ids), ["ours"], "a")
+    new = _run(_records("ours", True, ids), ["ours"], "b")
+    merged = peers_benchmark.replace_methods(base, new)
+    assert [(r["case_id"], r["method"]) for r in merged["records"]] == [
+        (ids[0], "ours"), (ids[0], "o3d_icp"), (ids[1], "ours"), (ids[1], "o3d_icp")
+    ]  # fmt: skip
+    success = {s["method"]: s["success_rate"] for s in merged["family_summary"]}
+    assert success == {"ours": 1.0, "o3d_icp": 1.0}
+    assert merged["core_sha256"] == "a" and merged["replaced"][0]["core_sha256"] == "b"
+    assert merged["runtime_s"] == 120.0 and merged["commands"] == ["a", "b"]
+    with pytest.raises(ValueError, match="cases of full"):
+        peers_benchmark.replace_methods(base, _run(_records("ours", True, ids[:1]), ["ours"], "c"))
