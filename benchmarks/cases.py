@@ -645,7 +645,6 @@ def _bunny_scan() -> tuple[np.ndarray, np.ndarray]:
 
 #: The depth camera: a 640 x 480, 58-degree Kinect / Ensenso-class sensor.
 CAMERA_SIZE = (640, 480)
-DEPTH_NOISE = {"sigma_0": 0.0005, "sigma_quadratic": 0.0019, "missing_fraction": 0.02}
 MIN_SCAN_POINTS = 300
 
 
@@ -739,7 +738,7 @@ def _scan(
     from spectral_vs.sim.camera import DepthNoise, depth_to_cloud
 
     if rng is not None:
-        depth = DepthNoise(**DEPTH_NOISE).apply(depth, rng)
+        depth = DepthNoise.kinect().apply(depth, rng)
     cloud = depth_to_cloud(depth, intrinsics())
     points = apply(T_world_camera, np.asarray(cloud.points))
     return points, np.asarray(cloud.normals) @ T_world_camera[:3, :3].T

@@ -583,11 +583,6 @@ def run_translate(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- servo-sim
 
 
-#: The depth noise of ``servo-sim --noise``: a Kinect-class sensor (0.5 mm + 1.9 mm/m^2 z^2,
-#: 2% missing pixels), as in the experiments' simulated scans.
-KINECT_NOISE = {"sigma_0": 0.0005, "sigma_quadratic": 0.0019, "missing_fraction": 0.02}
-
-
 def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any) -> str:
     true_t, true_r = servo_lib.pose_error(
         np.linalg.inv(np.asarray(record.T_base_camera)) @ T_world_reference
@@ -610,7 +605,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
     except ImportError as error:
         raise InputError(f"servo-sim: {error}") from error
     plotting = None if args.no_figures else _plotting("--out")
-    noise = sim.DepthNoise(**KINECT_NOISE, seed=args.seed) if args.noise else sim.DepthNoise()
+    noise = sim.DepthNoise.kinect(seed=args.seed) if args.noise else sim.DepthNoise()
     sim_params = sim.SimParams(mode=args.sim_mode, camera=sim.CameraParams(noise=noise))
     params = servo_lib.ServoParams(mode=args.mode, warm_start=args.warm_start)
     talk = not (args.json or args.quiet)
@@ -620,6 +615,10 @@ def run_servo_sim(args: argparse.Namespace) -> int:
         reference = robot.capture()
         T_world_reference = robot.camera_pose()
         starts = servo_lib.start_poses(robot.kinematics, args.set, args.starts, args.seed)
+
+        def progress(record: servo_lib.ServoRecord) -> None:
+            print(_servo_step_line(record, T_world_reference, servo_lib), flush=True)
+
         if talk:
             warm = ", warm-started" if args.warm_start else ""
             print(
@@ -640,15 +639,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                 servo_lib.SpectralServo(reference, params),
                 dt=args.dt,
                 max_steps=args.max_steps,
-                callback=(
-                    (
-                        lambda rec: print(
-                            _servo_step_line(rec, T_world_reference, servo_lib), flush=True
-                        )
-                    )
-                    if per_step
-                    else None
-                ),
+                callback=progress if per_step else None,
             )
             final_t, final_r = servo_lib.pose_error(
                 np.linalg.inv(robot.camera_pose()) @ T_world_reference

@@ -161,11 +161,11 @@ double window_margin(double search_voxel, const AlignParams& params) {
   return std::max(5.0 * params.voxel_size, 2.5 * search_voxel);
 }
 
+using Clock = std::chrono::steady_clock;
+
 // What Algorithm 1 works with: the scene, the model, the EGI correlation it ascends,
 // and the translation grids. The paper's mode starts on the grid over the whole scene
 // and moves to a window once the translation steps fit in it.
-using Clock = std::chrono::steady_clock;
-
 struct Problem {
   const SceneMap& scene;
   MovingModel& model;
@@ -311,13 +311,6 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
   return hypotheses;
 }
 
-// Beyond the paper: with noisy normals the EGI correlation peaks about a degree from the
-// truth, and it cannot see small asymmetric parts (a mug's handle). The 3D voxel
-// correlation sees the whole shape: the rotation is polished for the best overlap of the
-// model's voxels with the window's, the translation re-placed by phase correlation at
-// each trial. Per
-// step size (4 down to 1/4 degree), trials at +-step about each model axis give a
-// parabola per axis, whose vertex is tried as one combined step; the best trial wins.
 // Re-places `trial`'s translation by phase correlation in the window; its voxel overlap.
 double placed_overlap(const Problem& problem, TranslationWindow& window, Pose& trial, int& evaluations) {
   trial.offset += window.estimate(problem.model.move(trial)).shift;
@@ -325,6 +318,13 @@ double placed_overlap(const Problem& problem, TranslationWindow& window, Pose& t
   return window.overlap(problem.model.move(trial));
 }
 
+// Beyond the paper: with noisy normals the EGI correlation peaks about a degree from the
+// truth, and it cannot see small asymmetric parts (a mug's handle). The 3D voxel
+// correlation sees the whole shape: the rotation is polished for the best overlap of the
+// model's voxels with the window's, the translation re-placed by phase correlation at
+// each trial. Per
+// step size (4 down to 1/4 degree), trials at +-step about each model axis give a
+// parabola per axis, whose vertex is tried as one combined step; the best trial wins.
 Pose polish(const Problem& problem, TranslationWindow& window, Pose pose, int& evaluations) {
   window.follow(problem.model.centre(pose));
   const auto place = [&](Pose& trial) { return placed_overlap(problem, window, trial, evaluations); };

@@ -277,23 +277,20 @@ GridSpec bounded_scene_spec(const SceneMap& scene, const Eigen::AlignedBox3d& mo
 SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach,
                                    double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
                                    const GridLimits& limits)
-    : occupancy_(occupancy),
-      limits_(limits),
-      spec_(scene_spec(scene, start, reach, voxel_size, limits)),
-      phase_(spec_, params) {
-  target_ = voxelize(scene.cloud(), spec_, occupancy, limits);
-  target_energy_ = grid_energy(target_);
-  phase_.set_target(target_);
-}
+    : SceneTranslation(scene, scene_spec(scene, start, reach, voxel_size, limits), std::nullopt, occupancy, params,
+                       limits) {}
 
 SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
                                    double max_translation, double voxel_size, Occupancy occupancy,
                                    const PhaseCorrelationParams& params, const GridLimits& limits)
-    : occupancy_(occupancy),
-      limits_(limits),
-      spec_(bounded_scene_spec(scene, model_box, max_translation, voxel_size, limits)),
-      phase_(spec_, params),
-      max_shift_(Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits))) {
+    : SceneTranslation(scene, bounded_scene_spec(scene, model_box, max_translation, voxel_size, limits),
+                       Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits)), occupancy,
+                       params, limits) {}
+
+SceneTranslation::SceneTranslation(const SceneMap& scene, const GridSpec& spec,
+                                   const std::optional<Eigen::Vector3i>& max_shift, Occupancy occupancy,
+                                   const PhaseCorrelationParams& params, const GridLimits& limits)
+    : occupancy_(occupancy), limits_(limits), spec_(spec), phase_(spec_, params), max_shift_(max_shift) {
   target_ = voxelize(scene.cloud(), spec_, occupancy, limits);
   target_energy_ = grid_energy(target_);
   phase_.set_target(target_);

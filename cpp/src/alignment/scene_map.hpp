@@ -103,6 +103,9 @@ public:
   const GridSpec& spec() const { return spec_; }
 
 private:
+  SceneTranslation(const SceneMap& scene, const GridSpec& spec, const std::optional<Eigen::Vector3i>& max_shift,
+                   Occupancy occupancy, const PhaseCorrelationParams& params, const GridLimits& limits);
+
   Occupancy occupancy_;
   GridLimits limits_;
   GridSpec spec_;

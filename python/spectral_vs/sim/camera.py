@@ -109,6 +109,11 @@ class DepthNoise:
         if not 0.0 <= self.missing_fraction < 1.0:
             raise ValueError(f"missing_fraction must be in [0, 1), got {self.missing_fraction}")
 
+    @classmethod
+    def kinect(cls, seed: int = 0) -> DepthNoise:
+        """A Kinect-class sensor: 0.5 mm + 1.9 mm/m^2 z^2 along the ray, 2% missing pixels."""
+        return cls(sigma_0=0.0005, sigma_quadratic=0.0019, missing_fraction=0.02, seed=seed)
+
     @property
     def enabled(self) -> bool:
         """Whether any noise or missing pixels are configured."""
