@@ -14,9 +14,10 @@ namespace {
 constexpr Choices<RotationStep, 2> kRotationSteps{
     {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}};
 
-constexpr Choices<AlignStopReason, 3> kStopReasons{{{"converged", AlignStopReason::converged},
-                                                    {"max_iterations", AlignStopReason::max_iterations},
-                                                    {"max_seconds", AlignStopReason::max_seconds}}};
+constexpr Choices<AlignStopReason, 3> kStopReasons{
+    {{"converged", AlignStopReason::converged},
+     {"max_iterations", AlignStopReason::max_iterations},
+     {"max_seconds", AlignStopReason::max_seconds}}};
 
 }  // namespace
 
@@ -48,7 +49,8 @@ initial_guess : ndarray (4, 4)
 global_search : bool
     Start from the best rotations of the SO(3) search (default True).
 hypotheses : int
-    Rotations of the global search that are refined and verified (default 32).
+    Rotations of the global search that are refined and verified (default 32); half as
+    many per part of a cluttered scene.
 refinements : int
     The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
     scene around it; the best final fitness is kept (default 3, at most hypotheses).
@@ -64,12 +66,14 @@ max_translation : float
     of by the model's reach, and farther peaks are ignored (two views of one scene, as in
     servoing). 0 (default): unbounded.
 scene_viewpoint : ndarray (3,) or None
-    Sensor origin of a single-view scene, metres: fitness then scores only the model's
-    points facing it, which tells a pose from its flip (default None: seen from all sides).
+    Sensor origin of a single-view scene, metres: fitness then checks the pose against
+    what the view saw (the model rendered from there, pixel by pixel against the scan's
+    depth), which tells a pose from its flip (default None: seen from all sides).
 suppress_support_plane : bool
     With global search: search the scene without its support plane (a plane wider than 4
-    model reaches holding over a fifth of the points, e.g. a table); fitness still sees
-    it (default True).
+    model reaches holding over a fifth of the points, e.g. a table; fitness still sees
+    it), and where there is one, search each connected part of the scene above it that
+    could be the object on its own EGI (default True).
 polish : bool
     With global search: after Algorithm 1, a pattern search on the rotation (4 to 1/4
     degree steps) for the best overlap of the model's voxels with the scene's (default
@@ -90,22 +94,28 @@ max_voxels : int
 )doc")
       .def(py::init<>())
       .def("__copy__", [](const AlignParams& p) { return AlignParams(p); })
-      .def("__deepcopy__", [](const AlignParams& p, const py::dict&) { return AlignParams(p); }, py::arg("memo"))
+      .def(
+          "__deepcopy__", [](const AlignParams& p, const py::dict&) { return AlignParams(p); },
+          py::arg("memo"))
       .def_readwrite("voxel_size", &AlignParams::voxel_size)
       .def_readwrite("bandwidth", &AlignParams::bandwidth)
       .def_readwrite("translation_gain", &AlignParams::translation_gain)
       .def_readwrite("rotation_gain", &AlignParams::rotation_gain)
-      .def_property("rotation_step",
-                    [](const AlignParams& p) { return choice_name(p.rotation_step, kRotationSteps); },
-                    [](AlignParams& p, const std::string& s) {
-                      p.rotation_step = parse_choice(s, kRotationSteps, "rotation_step");
-                    })
+      .def_property(
+          "rotation_step",
+          [](const AlignParams& p) { return choice_name(p.rotation_step, kRotationSteps); },
+          [](AlignParams& p, const std::string& s) {
+            p.rotation_step = parse_choice(s, kRotationSteps, "rotation_step");
+          })
       .def_readwrite("max_rotation_step", &AlignParams::max_rotation_step)
       .def_readwrite("tolerance", &AlignParams::tolerance)
       .def_readwrite("max_iterations", &AlignParams::max_iterations)
       .def_readwrite("max_seconds", &AlignParams::max_seconds)
-      .def_property("initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },
-                    [](AlignParams& p, const py::handle& T) { p.initial_guess = to_transform(T, "initial_guess"); })
+      .def_property(
+          "initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },
+          [](AlignParams& p, const py::handle& T) {
+            p.initial_guess = to_transform(T, "initial_guess");
+          })
       .def_readwrite("global_search", &AlignParams::global_search)
       .def_readwrite("hypotheses", &AlignParams::hypotheses)
       .def_readwrite("refinements", &AlignParams::refinements)
@@ -116,45 +126,60 @@ max_voxels : int
       .def_readwrite("suppress_support_plane", &AlignParams::suppress_support_plane)
       .def_readwrite("polish", &AlignParams::polish)
       .def_readwrite("subvoxel", &AlignParams::subvoxel)
-      .def_property("occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
-                    [](AlignParams& p, const std::string& s) {
-                      p.occupancy = parse_choice(s, kOccupancies, "occupancy");
-                    })
-      .def_property("egi_method", [](const AlignParams& p) { return choice_name(p.egi_method, kEgiMethods); },
-                    [](AlignParams& p, const std::string& s) {
-                      p.egi_method = parse_choice(s, kEgiMethods, "egi_method");
-                    })
+      .def_property(
+          "occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
+          [](AlignParams& p, const std::string& s) {
+            p.occupancy = parse_choice(s, kOccupancies, "occupancy");
+          })
+      .def_property(
+          "egi_method", [](const AlignParams& p) { return choice_name(p.egi_method, kEgiMethods); },
+          [](AlignParams& p, const std::string& s) {
+            p.egi_method = parse_choice(s, kEgiMethods, "egi_method");
+          })
       .def_readwrite("threads", &AlignParams::threads)
-      .def_property("max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
-                    [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
+      .def_property(
+          "max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
+          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
       .def("__repr__", [](const AlignParams& p) {
         std::ostringstream out;
         out << "AlignParams(voxel_size=" << p.voxel_size << ", bandwidth=" << p.bandwidth
-            << ", global_search=" << (p.global_search ? "True" : "False") << ", hypotheses=" << p.hypotheses
-            << ", max_iterations=" << p.max_iterations << ")";
+            << ", global_search=" << (p.global_search ? "True" : "False")
+            << ", hypotheses=" << p.hypotheses << ", max_iterations=" << p.max_iterations << ")";
         return out.str();
       });
 
   py::class_<AlignIteration>(m, "AlignIteration", "One iteration of Algorithm 1, after its update.")
-      .def_readonly("translation_cost", &AlignIteration::translation_cost, "J_t of eq. (9), voxel units.")
+      .def_readonly("translation_cost", &AlignIteration::translation_cost,
+                    "J_t of eq. (9), voxel units.")
       .def_readonly("rotation_cost", &AlignIteration::rotation_cost, "J_r of eq. (16), normalised.")
-      .def_readonly("translation_step", &AlignIteration::translation_step, "|lambda_t shift|, voxels.")
-      .def_readonly("rotation_gradient", &AlignIteration::rotation_gradient, "|grad C|, per radian.")
+      .def_readonly("translation_step", &AlignIteration::translation_step,
+                    "|lambda_t shift|, voxels.")
+      .def_readonly("rotation_gradient", &AlignIteration::rotation_gradient,
+                    "|grad C|, per radian.")
       .def_readonly("correlation", &AlignIteration::correlation, "Normalised EGI correlation.")
-      .def_readonly("translation_peak", &AlignIteration::translation_peak, "Phase-correlation peak.")
+      .def_readonly("translation_peak", &AlignIteration::translation_peak,
+                    "Phase-correlation peak.")
       .def_readonly("seconds", &AlignIteration::seconds, "Wall time of the iteration, seconds.")
-      .def_property_readonly("T_scene_model", [](const AlignIteration& i) { return Eigen::Matrix4d(i.T_scene_model); });
+      .def_property_readonly("T_scene_model", [](const AlignIteration& i) {
+        return Eigen::Matrix4d(i.T_scene_model);
+      });
 
   py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
-      .def_property_readonly("T_scene_model", [](const AlignResult& r) { return Eigen::Matrix4d(r.T_scene_model); },
-                             "4x4 transform mapping model coordinates into the scene.")
+      .def_property_readonly(
+          "T_scene_model", [](const AlignResult& r) { return Eigen::Matrix4d(r.T_scene_model); },
+          "4x4 transform mapping model coordinates into the scene.")
       .def_readonly("converged", &AlignResult::converged)
       .def_property_readonly(
-          "stop_reason", [](const AlignResult& r) { return choice_name(r.stop_reason, kStopReasons); },
+          "stop_reason",
+          [](const AlignResult& r) { return choice_name(r.stop_reason, kStopReasons); },
           "Why it stopped: 'converged', 'max_iterations' or 'max_seconds'.")
       .def_readonly("iterations", &AlignResult::iterations)
-      .def_readonly("fitness", &AlignResult::fitness,
-                    "Share of the model's occupied voxels next to scene points, in [0, 1].")
+      .def_readonly(
+          "fitness", &AlignResult::fitness,
+          "How well the scene supports the pose, in [0, 1]: the share of the model's occupied "
+          "voxels next to scene points with like normals; with scene_viewpoint, "
+          "confirmed / (confirmed + contradicted + hidden / 2) over the pixels of the "
+          "model rendered from there.")
       .def_readonly("correlation", &AlignResult::correlation)
       .def_readonly("translation_peak", &AlignResult::translation_peak)
       .def_readonly("hypothesis", &AlignResult::hypothesis)
@@ -162,19 +187,21 @@ max_voxels : int
                     "Voxel of the global search's translation grid, metres (0 without it).")
       .def_readonly("polish_evaluations", &AlignResult::polish_evaluations,
                     "Phase correlations of the final polish (0 without).")
-      .def_property_readonly("window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
-                             "Voxels of the window Algorithm 1 ran in, per axis.")
+      .def_property_readonly(
+          "window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
+          "Voxels of the window Algorithm 1 ran in, per axis.")
       .def_readonly("history", &AlignResult::history)
       .def("__repr__", [](const AlignResult& r) {
         std::ostringstream out;
-        out << "AlignResult(converged=" << (r.converged ? "True" : "False")
-            << ", stop_reason='" << choice_name(r.stop_reason, kStopReasons) << "', iterations=" << r.iterations
+        out << "AlignResult(converged=" << (r.converged ? "True" : "False") << ", stop_reason='"
+            << choice_name(r.stop_reason, kStopReasons) << "', iterations=" << r.iterations
             << ", fitness=" << r.fitness << ", correlation=" << r.correlation << ")";
         return out.str();
       });
 
   m.def("_align", &align, py::arg("model"), py::arg("scene"), py::arg("params"),
-        py::call_guard<py::gil_scoped_release>(), "Algorithm 1 on clouds with normals; see spectral_vs.align.");
+        py::call_guard<py::gil_scoped_release>(),
+        "Algorithm 1 on clouds with normals; see spectral_vs.align.");
 }
 
 }  // namespace spectral_vs::python

@@ -25,12 +25,14 @@ inline Points to_points(const py::handle& object, const char* argument) {
   if (!array) throw py::value_error(std::string(argument) + " must be an array-like of floats");
   const char kind = array.dtype().kind();
   if (kind != 'f') {
-    throw py::value_error(std::string(argument) + " must have a floating dtype (float32 or float64), got " +
+    throw py::value_error(std::string(argument) +
+                          " must have a floating dtype (float32 or float64), got " +
                           std::string(py::str(array.dtype())));
   }
   if (array.ndim() != 2 || array.shape(1) != 3) {
     std::string shape = "(";
-    for (py::ssize_t i = 0; i < array.ndim(); ++i) shape += (i ? ", " : "") + std::to_string(array.shape(i));
+    for (py::ssize_t i = 0; i < array.ndim(); ++i)
+      shape += (i ? ", " : "") + std::to_string(array.shape(i));
     throw py::value_error(std::string(argument) + " must have shape (N, 3), got " + shape + ")");
   }
   auto doubles = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(array);
@@ -44,9 +46,11 @@ template <typename Matrix>
 py::array readonly_view(const Matrix& matrix, py::handle owner) {
   using Scalar = typename Matrix::Scalar;
   static_assert(Matrix::IsRowMajor || Matrix::ColsAtCompileTime == 1, "row-major expected");
-  py::array_t<Scalar> view({static_cast<py::ssize_t>(matrix.rows()), static_cast<py::ssize_t>(matrix.cols())},
-                           {static_cast<py::ssize_t>(sizeof(Scalar) * matrix.cols()), static_cast<py::ssize_t>(sizeof(Scalar))},
-                           matrix.data(), owner);
+  py::array_t<Scalar> view(
+      {static_cast<py::ssize_t>(matrix.rows()), static_cast<py::ssize_t>(matrix.cols())},
+      {static_cast<py::ssize_t>(sizeof(Scalar) * matrix.cols()),
+       static_cast<py::ssize_t>(sizeof(Scalar))},
+      matrix.data(), owner);
   view.attr("setflags")(py::arg("write") = false);
   return std::move(view);
 }
@@ -91,8 +95,8 @@ const char* choice_name(Enum value, const Choices<Enum, N>& choices) {
 inline constexpr Choices<Occupancy, 3> kOccupancies{{{"binary", Occupancy::binary},
                                                      {"count", Occupancy::count},
                                                      {"trilinear", Occupancy::trilinear}}};
-inline constexpr Choices<EgiMethod, 2> kEgiMethods{{{"projection", EgiMethod::projection},
-                                                    {"histogram", EgiMethod::histogram}}};
+inline constexpr Choices<EgiMethod, 2> kEgiMethods{
+    {{"projection", EgiMethod::projection}, {"histogram", EgiMethod::histogram}}};
 
 /// The normals of a PointCloud (which must have them) or an (N, 3) float array of normals.
 inline Points normals_of(const py::handle& object) {
@@ -108,6 +112,7 @@ void define_representation(py::module_& m);
 void define_translation(py::module_& m);
 void define_rotation(py::module_& m);
 void define_alignment(py::module_& m);
+void define_model_aligner(py::module_& m);
 void define_kinematics(py::module_& m);
 
 }  // namespace spectral_vs::python

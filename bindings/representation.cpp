@@ -4,6 +4,7 @@
 
 #include <spectral_vs/representation/cloud_io.hpp>
 #include <spectral_vs/representation/egi.hpp>
+#include <spectral_vs/representation/organized.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
 
@@ -31,11 +32,13 @@ PointCloud make_cloud(const py::handle& points, const py::handle& normals, bool 
 }
 
 constexpr Choices<NormalOrientation, 2> kOrientations{
-    {{"toward_viewpoint", NormalOrientation::toward_viewpoint}, {"outward", NormalOrientation::outward}}};
+    {{"toward_viewpoint", NormalOrientation::toward_viewpoint},
+     {"outward", NormalOrientation::outward}}};
 
-constexpr Choices<PcdEncoding, 3> kEncodings{{{"ascii", PcdEncoding::ascii},
-                                              {"binary", PcdEncoding::binary},
-                                              {"binary_compressed", PcdEncoding::binary_compressed}}};
+constexpr Choices<PcdEncoding, 3> kEncodings{
+    {{"ascii", PcdEncoding::ascii},
+     {"binary", PcdEncoding::binary},
+     {"binary_compressed", PcdEncoding::binary_compressed}}};
 
 void require_file(const std::filesystem::path& path) {
   std::error_code error;
@@ -73,19 +76,28 @@ drop_non_finite : bool
       .def(py::init(&make_cloud), py::arg("points"), py::arg("normals") = py::none(), py::kw_only(),
            py::arg("drop_non_finite") = false)
       .def("__len__", &PointCloud::size)
-      .def_property_readonly("points", [](py::object self) {
-        return readonly_view(self.cast<const PointCloud&>().points(), self);
-      }, "(N, 3) float64 read-only view of the points, metres.")
-      .def_property_readonly("normals", [](py::object self) -> py::object {
-        const auto& cloud = self.cast<const PointCloud&>();
-        if (!cloud.has_normals()) return py::none();
-        return readonly_view(cloud.normals(), self);
-      }, "(N, 3) float64 read-only view of the unit normals, or None.")
+      .def_property_readonly(
+          "points",
+          [](py::object self) {
+            return readonly_view(self.cast<const PointCloud&>().points(), self);
+          },
+          "(N, 3) float64 read-only view of the points, metres.")
+      .def_property_readonly(
+          "normals",
+          [](py::object self) -> py::object {
+            const auto& cloud = self.cast<const PointCloud&>();
+            if (!cloud.has_normals()) return py::none();
+            return readonly_view(cloud.normals(), self);
+          },
+          "(N, 3) float64 read-only view of the unit normals, or None.")
       .def_property_readonly("has_normals", &PointCloud::has_normals)
       .def("centroid", &PointCloud::centroid, "Mean of the points, metres.")
-      .def("transformed", [](const PointCloud& cloud, const py::handle& T) {
-        return cloud.transformed(to_transform(T, "T_target_source"));
-      }, py::arg("T_target_source"), "The cloud moved by a 4x4 rigid transform (normals rotated).")
+      .def(
+          "transformed",
+          [](const PointCloud& cloud, const py::handle& T) {
+            return cloud.transformed(to_transform(T, "T_target_source"));
+          },
+          py::arg("T_target_source"), "The cloud moved by a 4x4 rigid transform (normals rotated).")
       .def("__repr__", [](const PointCloud& cloud) {
         std::ostringstream out;
         out << "PointCloud(" << cloud.size() << " points, " << (cloud.has_normals() ? "with" : "no")
@@ -101,53 +113,86 @@ drop_non_finite : bool
       .def_readonly("had_normals", &CloudFileInfo::had_normals)
       .def("__repr__", [](const CloudFileInfo& i) {
         std::ostringstream out;
-        out << "CloudFileInfo(width=" << i.width << ", height=" << i.height << ", points_in_file="
-            << i.points_in_file << ", non_finite_dropped=" << i.non_finite_dropped
+        out << "CloudFileInfo(width=" << i.width << ", height=" << i.height
+            << ", points_in_file=" << i.points_in_file
+            << ", non_finite_dropped=" << i.non_finite_dropped
             << ", had_normals=" << (i.had_normals ? "True" : "False") << ")";
         return out.str();
       });
 
-  m.def("load_cloud_with_info", [](const std::filesystem::path& path) {
-    require_file(path);
-    CloudFileInfo info;
-    PointCloud cloud;
-    {
-      py::gil_scoped_release release;
-      cloud = load_cloud(path.string(), &info);
-    }
-    return py::make_tuple(std::move(cloud), info);
-  }, py::arg("path"), "Load a .pcd or .ply file; return (PointCloud, CloudFileInfo).");
+  m.def(
+      "load_cloud_with_info",
+      [](const std::filesystem::path& path) {
+        require_file(path);
+        CloudFileInfo info;
+        PointCloud cloud;
+        {
+          py::gil_scoped_release release;
+          cloud = load_cloud(path.string(), &info);
+        }
+        return py::make_tuple(std::move(cloud), info);
+      },
+      py::arg("path"), "Load a .pcd or .ply file; return (PointCloud, CloudFileInfo).");
 
-  m.def("save_cloud", [](const std::filesystem::path& path, const PointCloud& cloud,
-                         const std::string& encoding) {
-    const PcdEncoding parsed = parse_choice(encoding, kEncodings, "encoding");
-    py::gil_scoped_release release;
-    save_cloud(path.string(), cloud, parsed);
-  }, py::arg("path"), py::arg("cloud"), py::arg("encoding") = "binary_compressed",
-        "Save to .pcd (encoding: ascii, binary, binary_compressed) or .ply, as float32.");
+  m.def(
+      "save_cloud",
+      [](const std::filesystem::path& path, const PointCloud& cloud, const std::string& encoding) {
+        const PcdEncoding parsed = parse_choice(encoding, kEncodings, "encoding");
+        py::gil_scoped_release release;
+        save_cloud(path.string(), cloud, parsed);
+      },
+      py::arg("path"), py::arg("cloud"), py::arg("encoding") = "binary_compressed",
+      "Save to .pcd (encoding: ascii, binary, binary_compressed) or .ply, as float32.");
 
   m.def("voxel_downsample", &voxel_downsample, py::arg("cloud"), py::arg("voxel_size"),
         py::call_guard<py::gil_scoped_release>(),
         "Replace the points of each voxel_size cube (metres) by their centroid; normals averaged.");
 
-  m.def("estimate_normals", [](const PointCloud& cloud, double radius, int k_neighbors,
-                               const Eigen::Vector3d& viewpoint, const std::string& orientation,
-                               int threads) {
-    NormalEstimationParams params;
-    params.radius = radius;
-    params.k_neighbors = k_neighbors;
-    params.viewpoint = viewpoint;
-    params.orientation = parse_choice(orientation, kOrientations, "orientation");
-    params.threads = threads;
-    py::gil_scoped_release release;
-    return estimate_normals(cloud, params);
-  }, py::arg("cloud"), py::arg("radius") = 0.015, py::arg("k_neighbors") = 0,
-        py::arg("viewpoint") = Eigen::Vector3d::Zero(), py::arg("orientation") = "toward_viewpoint",
-        py::arg("threads") = 1,
-        "Plane-fit normals (PCL), oriented toward `viewpoint` or 'outward' from the centroid.");
+  m.def(
+      "organized_cloud",
+      [](const py::handle& depth, double fx, double fy, double cx, double cy, int normal_step,
+         int window, double max_depth_jump, int stride) {
+        auto array = py::array::ensure(depth);
+        if (!array || array.dtype().kind() != 'f' || array.ndim() != 2) {
+          throw py::value_error("depth must be a 2-D array of floats (height, width), metres");
+        }
+        auto doubles =
+            py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(array);
+        const Eigen::Map<const DepthImage> image(doubles.data(), doubles.shape(0),
+                                                 doubles.shape(1));
+        const PinholeIntrinsics intrinsics{fx, fy, cx, cy};
+        const OrganizedNormalParams params{normal_step, window, max_depth_jump, stride};
+        py::gil_scoped_release release;
+        return organized_cloud(image, intrinsics, params);
+      },
+      py::arg("depth"), py::arg("fx"), py::arg("fy"), py::arg("cx"), py::arg("cy"),
+      py::arg("normal_step") = 2, py::arg("window") = 5, py::arg("max_depth_jump") = 0.05,
+      py::arg("stride") = 1,
+      "Points and unit normals (toward the camera) of a planar depth image (metres, NaN = no "
+      "return), camera frame; every stride-th pixel with a reliable normal, row-major.");
 
-  py::class_<GridSpec>(m, "GridSpec", "Origin (m), resolution (m) and dims (voxels) of a voxel grid.")
-      .def(py::init([](const Eigen::Vector3d& origin, double resolution, const std::array<long long, 3>& dims) {
+  m.def(
+      "estimate_normals",
+      [](const PointCloud& cloud, double radius, int k_neighbors, const Eigen::Vector3d& viewpoint,
+         const std::string& orientation, int threads) {
+        NormalEstimationParams params;
+        params.radius = radius;
+        params.k_neighbors = k_neighbors;
+        params.viewpoint = viewpoint;
+        params.orientation = parse_choice(orientation, kOrientations, "orientation");
+        params.threads = threads;
+        py::gil_scoped_release release;
+        return estimate_normals(cloud, params);
+      },
+      py::arg("cloud"), py::arg("radius") = 0.015, py::arg("k_neighbors") = 0,
+      py::arg("viewpoint") = Eigen::Vector3d::Zero(), py::arg("orientation") = "toward_viewpoint",
+      py::arg("threads") = 1,
+      "Plane-fit normals (PCL), oriented toward `viewpoint` or 'outward' from the centroid.");
+
+  py::class_<GridSpec>(m, "GridSpec",
+                       "Origin (m), resolution (m) and dims (voxels) of a voxel grid.")
+      .def(py::init([](const Eigen::Vector3d& origin, double resolution,
+                       const std::array<long long, 3>& dims) {
              // Checked here: a Python int past the range of int would otherwise wrap.
              if (!origin.allFinite()) throw py::value_error("origin must be finite");
              if (!(std::isfinite(resolution) && resolution > 0.0)) {
@@ -156,20 +201,22 @@ drop_non_finite : bool
              GridSpec spec;
              for (int axis = 0; axis < 3; ++axis) {
                if (dims[axis] < 1 || dims[axis] > kMaxGridIndex) {
-                 throw py::value_error("dims must be in [1, " + std::to_string(kMaxGridIndex) + "], got " +
-                                       std::to_string(dims[axis]));
+                 throw py::value_error("dims must be in [1, " + std::to_string(kMaxGridIndex) +
+                                       "], got " + std::to_string(dims[axis]));
                }
                spec.dims[axis] = static_cast<int>(dims[axis]);
              }
              spec.origin = origin;
              spec.resolution = resolution;
              return spec;
-           }), py::arg("origin"), py::arg("resolution"), py::arg("dims"))
+           }),
+           py::arg("origin"), py::arg("resolution"), py::arg("dims"))
       .def_readonly("origin", &GridSpec::origin)
       .def_readonly("resolution", &GridSpec::resolution)
       .def_readonly("dims", &GridSpec::dims)
       .def_property_readonly("voxel_count", &GridSpec::voxel_count)
-      .def("index_of", &GridSpec::index_of, py::arg("point"), "floor((point - origin) / resolution).")
+      .def("index_of", &GridSpec::index_of, py::arg("point"),
+           "floor((point - origin) / resolution).")
       .def("__repr__", [](const GridSpec& s) {
         std::ostringstream out;
         out << "GridSpec(origin=[" << s.origin.transpose() << "], resolution=" << s.resolution
@@ -178,59 +225,74 @@ drop_non_finite : bool
       });
 
   m.def("fft_friendly_size", &fft_friendly_size, py::arg("n"),
-        "Smallest n' >= n (2 for n <= 2) on which FFTW is fast: a measured table up to 1024, then even "
+        "Smallest n' >= n (2 for n <= 2) on which FFTW is fast: a measured table up to 1024, then "
+        "even "
         "products of 2, 3 and 5. n <= 2^30.");
 
-  m.def("make_grid_spec", [](const PointCloud& a, const PointCloud& b, double resolution,
-                             std::size_t max_voxels) {
-    return make_grid_spec(bounding_box(a), bounding_box(b), resolution, GridLimits{max_voxels});
-  }, py::arg("cloud_a"), py::arg("cloud_b"), py::arg("resolution"),
-        py::arg("max_voxels") = GridLimits{}.max_voxels,
-        "A grid holding both clouds in which their shift cannot alias; refuses grids over max_voxels.");
+  m.def(
+      "make_grid_spec",
+      [](const PointCloud& a, const PointCloud& b, double resolution, std::size_t max_voxels) {
+        return make_grid_spec(bounding_box(a), bounding_box(b), resolution, GridLimits{max_voxels});
+      },
+      py::arg("cloud_a"), py::arg("cloud_b"), py::arg("resolution"),
+      py::arg("max_voxels") = GridLimits{}.max_voxels,
+      "A grid holding both clouds in which their shift cannot alias; refuses grids over "
+      "max_voxels.");
 
   py::class_<VoxelGrid>(m, "VoxelGrid", "Voxel values on a GridSpec (eq. 1-2).")
       .def_readonly("spec", &VoxelGrid::spec)
-      .def_property_readonly("values", [](py::object self) {
-        return grid_values(self.cast<const VoxelGrid&>(), self);
-      }, "(nx, ny, nz) float32 read-only view of the voxel values.")
+      .def_property_readonly(
+          "values",
+          [](py::object self) { return grid_values(self.cast<const VoxelGrid&>(), self); },
+          "(nx, ny, nz) float32 read-only view of the voxel values.")
       .def_readonly("points_outside", &VoxelGrid::points_outside)
       .def_readonly("occupied_min", &VoxelGrid::occupied_min)
       .def_readonly("occupied_max", &VoxelGrid::occupied_max)
       .def("__repr__", [](const VoxelGrid& g) {
         std::ostringstream out;
-        out << "VoxelGrid(dims=[" << g.spec.dims.transpose() << "], resolution=" << g.spec.resolution
-            << ", points_outside=" << g.points_outside << ")";
+        out << "VoxelGrid(dims=[" << g.spec.dims.transpose()
+            << "], resolution=" << g.spec.resolution << ", points_outside=" << g.points_outside
+            << ")";
         return out.str();
       });
 
-  m.def("voxelize", [](const PointCloud& cloud, const GridSpec& spec, const std::string& occupancy,
-                       std::size_t max_voxels) {
-    const Occupancy parsed = parse_choice(occupancy, kOccupancies, "occupancy");
-    py::gil_scoped_release release;
-    return voxelize(cloud, spec, parsed, GridLimits{max_voxels});
-  }, py::arg("cloud"), py::arg("spec"), py::arg("occupancy") = "binary",
-        py::arg("max_voxels") = GridLimits{}.max_voxels,
-        "Voxel grid of a cloud: 'binary' (eq. 2), 'count' or 'trilinear' occupancy.");
+  m.def(
+      "voxelize",
+      [](const PointCloud& cloud, const GridSpec& spec, const std::string& occupancy,
+         std::size_t max_voxels) {
+        const Occupancy parsed = parse_choice(occupancy, kOccupancies, "occupancy");
+        py::gil_scoped_release release;
+        return voxelize(cloud, spec, parsed, GridLimits{max_voxels});
+      },
+      py::arg("cloud"), py::arg("spec"), py::arg("occupancy") = "binary",
+      py::arg("max_voxels") = GridLimits{}.max_voxels,
+      "Voxel grid of a cloud: 'binary' (eq. 2), 'count' or 'trilinear' occupancy.");
 
-  m.def("egi", [](const py::handle& cloud_or_normals, int bandwidth,
-                  std::optional<Eigen::VectorXd> weights) {
-    const Points normals = normals_of(cloud_or_normals);
-    return egi_histogram(normals, bandwidth, weights ? &*weights : nullptr);
-  }, py::arg("cloud_or_normals"), py::arg("bandwidth"), py::arg("weights") = py::none(),
-        "EGI of eq. (4): (2B, 2B) histogram of normals indexed [j, k] at theta_j, phi_k.");
+  m.def(
+      "egi",
+      [](const py::handle& cloud_or_normals, int bandwidth,
+         std::optional<Eigen::VectorXd> weights) {
+        const Points normals = normals_of(cloud_or_normals);
+        return egi_histogram(normals, bandwidth, weights ? &*weights : nullptr);
+      },
+      py::arg("cloud_or_normals"), py::arg("bandwidth"), py::arg("weights") = py::none(),
+      "EGI of eq. (4): (2B, 2B) histogram of normals indexed [j, k] at theta_j, phi_k.");
 
   m.def("egi_cell", &egi_cell, py::arg("normal"), py::arg("bandwidth"),
         "(j, k) of the grid node nearest to a unit normal.");
 
-  m.def("sphere_grid", [](int bandwidth) {
-    require_bandwidth(bandwidth);
-    Eigen::VectorXd theta(2 * bandwidth), phi(2 * bandwidth);
-    for (int i = 0; i < 2 * bandwidth; ++i) {
-      theta[i] = grid_theta(i, bandwidth);
-      phi[i] = grid_phi(i, bandwidth);
-    }
-    return py::make_tuple(theta, phi);
-  }, py::arg("bandwidth"), "(theta_j, phi_k) of the 2B x 2B grid, radians.");
+  m.def(
+      "sphere_grid",
+      [](int bandwidth) {
+        require_bandwidth(bandwidth);
+        Eigen::VectorXd theta(2 * bandwidth), phi(2 * bandwidth);
+        for (int i = 0; i < 2 * bandwidth; ++i) {
+          theta[i] = grid_theta(i, bandwidth);
+          phi[i] = grid_phi(i, bandwidth);
+        }
+        return py::make_tuple(theta, phi);
+      },
+      py::arg("bandwidth"), "(theta_j, phi_k) of the 2B x 2B grid, radians.");
 }
 
 }  // namespace spectral_vs::python

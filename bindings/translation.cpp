@@ -39,7 +39,8 @@ VoxelGrid to_grid(const py::handle& object, const char* argument) {
     for (int j = 0; j < grid.spec.dims.y(); ++j)
       for (int k = 0; k < grid.spec.dims.z(); ++k) {
         const float v = grid.at(i, j, k);
-        if (!std::isfinite(v)) throw py::value_error(std::string(argument) + " has non-finite values");
+        if (!std::isfinite(v))
+          throw py::value_error(std::string(argument) + " has non-finite values");
         if (v != 0.0f) {
           grid.occupied_min = grid.occupied_min.cwiseMin(Eigen::Vector3i(i, j, k));
           grid.occupied_max = grid.occupied_max.cwiseMax(Eigen::Vector3i(i, j, k));
@@ -49,7 +50,8 @@ VoxelGrid to_grid(const py::handle& object, const char* argument) {
   return grid;
 }
 
-PhaseCorrelationParams make_params(bool subvoxel, double band, int threads, std::size_t max_voxels) {
+PhaseCorrelationParams make_params(bool subvoxel, double band, int threads,
+                                   std::size_t max_voxels) {
   PhaseCorrelationParams params;
   params.subvoxel = subvoxel;
   params.subvoxel_band = band;
@@ -61,15 +63,18 @@ PhaseCorrelationParams make_params(bool subvoxel, double band, int threads, std:
 }  // namespace
 
 void define_translation(py::module_& m) {
-  py::class_<TranslationEstimate>(m, "TranslationEstimate",
-                                  "Shift of a moving grid onto a target: target(x) ~ moving(x - shift).")
+  py::class_<TranslationEstimate>(
+      m, "TranslationEstimate",
+      "Shift of a moving grid onto a target: target(x) ~ moving(x - shift).")
       .def_readonly("shift_voxels", &TranslationEstimate::shift_voxels, "Refined shift, voxels.")
-      .def_readonly("peak_voxels", &TranslationEstimate::peak_voxels, "Integer correlation peak, voxels.")
+      .def_readonly("peak_voxels", &TranslationEstimate::peak_voxels,
+                    "Integer correlation peak, voxels.")
       .def_readonly("shift", &TranslationEstimate::shift, "Refined shift, metres.")
       .def_readonly("peak", &TranslationEstimate::peak, "Normalised peak height in [0, 1].")
       .def("__repr__", [](const TranslationEstimate& e) {
         std::ostringstream out;
-        out << "TranslationEstimate(shift_voxels=[" << e.shift_voxels.transpose() << "], peak=" << e.peak << ")";
+        out << "TranslationEstimate(shift_voxels=[" << e.shift_voxels.transpose()
+            << "], peak=" << e.peak << ")";
         return out.str();
       });
 
@@ -89,34 +94,41 @@ max_voxels : int
     Grids with more voxels are refused before any buffer is allocated (about 20 bytes
     per voxel).
 )doc")
-      .def(py::init([](const GridSpec& spec, bool subvoxel, double band, int threads, std::size_t max_voxels) {
+      .def(py::init([](const GridSpec& spec, bool subvoxel, double band, int threads,
+                       std::size_t max_voxels) {
              return PhaseCorrelation(spec, make_params(subvoxel, band, threads, max_voxels));
-           }), py::arg("spec"), py::arg("subvoxel") = true, py::arg("subvoxel_band") = 0.25,
+           }),
+           py::arg("spec"), py::arg("subvoxel") = true, py::arg("subvoxel_band") = 0.25,
            py::arg("threads") = 1, py::arg("max_voxels") = GridLimits{}.max_voxels)
       .def("set_target", &PhaseCorrelation::set_target, py::arg("target"),
            py::call_guard<py::gil_scoped_release>())
       .def(
           "estimate",
-          [](PhaseCorrelation& self, const VoxelGrid& moving, std::optional<Eigen::Vector3i> max_shift) {
+          [](PhaseCorrelation& self, const VoxelGrid& moving,
+             std::optional<Eigen::Vector3i> max_shift) {
             return max_shift ? self.estimate(moving, *max_shift) : self.estimate(moving);
           },
-          py::arg("moving"), py::arg("max_shift") = py::none(), py::call_guard<py::gil_scoped_release>(),
+          py::arg("moving"), py::arg("max_shift") = py::none(),
+          py::call_guard<py::gil_scoped_release>(),
           "Shift of `moving` onto the target; `max_shift` (voxels per axis) bounds the search.")
       .def_property_readonly("has_target", &PhaseCorrelation::has_target)
       .def_property_readonly("spec", &PhaseCorrelation::spec);
 
-  m.def("phase_correlation", [](const py::handle& grid_a, const py::handle& grid_b, bool subvoxel,
-                                double band, std::size_t max_voxels) {
-    const VoxelGrid a = to_grid(grid_a, "grid_a");
-    const VoxelGrid b = to_grid(grid_b, "grid_b");
-    TranslationEstimate estimate;
-    {
-      py::gil_scoped_release release;
-      estimate = phase_correlation(a, b, make_params(subvoxel, band, 1, max_voxels));
-    }
-    return py::make_tuple(estimate.shift_voxels, estimate.peak);
-  }, py::arg("grid_a"), py::arg("grid_b"), py::arg("subvoxel") = true, py::arg("subvoxel_band") = 0.25,
-        py::arg("max_voxels") = GridLimits{}.max_voxels, R"doc(
+  m.def(
+      "phase_correlation",
+      [](const py::handle& grid_a, const py::handle& grid_b, bool subvoxel, double band,
+         std::size_t max_voxels) {
+        const VoxelGrid a = to_grid(grid_a, "grid_a");
+        const VoxelGrid b = to_grid(grid_b, "grid_b");
+        TranslationEstimate estimate;
+        {
+          py::gil_scoped_release release;
+          estimate = phase_correlation(a, b, make_params(subvoxel, band, 1, max_voxels));
+        }
+        return py::make_tuple(estimate.shift_voxels, estimate.peak);
+      },
+      py::arg("grid_a"), py::arg("grid_b"), py::arg("subvoxel") = true,
+      py::arg("subvoxel_band") = 0.25, py::arg("max_voxels") = GridLimits{}.max_voxels, R"doc(
 Shift s in voxels such that grid_b(x) ~ grid_a(x - s), and the peak height in [0, 1].
 
 Grids are VoxelGrids on the same spec or 3-D arrays of the same shape. Only shifts
@@ -124,11 +136,13 @@ for which the occupied parts overlap are searched. Grids over ``max_voxels`` vox
 refused before the transforms are allocated.
 )doc");
 
-  m.def("translation_cost", [](const py::handle& moving, const py::handle& target,
-                               const Eigen::Vector3i& shift) {
-    return translation_cost(to_grid(moving, "moving"), to_grid(target, "target"), shift);
-  }, py::arg("moving"), py::arg("target"), py::arg("shift"),
-        "J_t of eq. (9): 0.5 * sum (target(x) - moving(x - shift))^2 for an integer shift.");
+  m.def(
+      "translation_cost",
+      [](const py::handle& moving, const py::handle& target, const Eigen::Vector3i& shift) {
+        return translation_cost(to_grid(moving, "moving"), to_grid(target, "target"), shift);
+      },
+      py::arg("moving"), py::arg("target"), py::arg("shift"),
+      "J_t of eq. (9): 0.5 * sum (target(x) - moving(x - shift))^2 for an integer shift.");
 }
 
 }  // namespace spectral_vs::python

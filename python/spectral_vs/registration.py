@@ -148,7 +148,9 @@ def align(
     -------
     AlignResult
         ``T_scene_model`` maps model coordinates into the scene; ``converged``,
-        ``iterations``, ``fitness`` (share of model voxels next to scene points) and the
+        ``iterations``, ``fitness`` (in [0, 1]: the share of model voxels next to scene
+        points, or with ``scene_viewpoint`` the share of the model's rendered view that the
+        scan confirms, hidden pixels counted half; see ``AlignResult.fitness``) and the
         per-iteration ``history`` of J_t, J_r and the gradients. Not converging within
         ``max_iterations`` gives ``converged = False``, not an exception.
 

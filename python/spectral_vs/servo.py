@@ -47,9 +47,9 @@ from spectral_vs._core import (
     AlignParams,
     AlignResult,
     Kinematics,
+    ModelAligner,
     PointCloud,
     VelocityCommandParams,
-    _align,
 )
 from spectral_vs.registration import CloudLike, as_cloud, prepare
 from spectral_vs.robot import RobotInterface
@@ -507,6 +507,9 @@ class SpectralServo:
             )
         self._align_params = self.params.align_params()
         self.reference = prepare(cloud, "reference", self.params.voxel_size, True, (0, 0, 0))
+        # The reference's side of the registration (its EGI coefficients, centred points)
+        # is prepared once here; each step adds only the current cloud's work.
+        self._aligner = ModelAligner(self.reference, self._align_params)
         self._previous: np.ndarray | None = None
         self._armed = False
         self._steps = 0
@@ -548,11 +551,7 @@ class SpectralServo:
         """
         cloud = self._crop(as_cloud(current, "current"))
         scene = prepare(cloud, "current", self.params.voxel_size, True, (0, 0, 0))
-        settings = self._align_params
-        if initial_guess is not None:
-            settings = copy.copy(settings)
-            settings.initial_guess = np.asarray(initial_guess, dtype=float)
-        result = _align(self.reference, scene, settings)
+        result = self._aligner.align(scene, initial_guess)
         return np.asarray(result.T_scene_model), result
 
     def twist(self, T_current_desired: np.ndarray) -> tuple[np.ndarray, float]:

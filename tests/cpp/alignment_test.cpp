@@ -29,7 +29,8 @@ PointCloud box_with_ball(int samples, std::mt19937& rng) {
     n.row(count++) = normal.transpose();
   }
   for (int i = 0; i < samples / 2; ++i) {
-    const Eigen::Vector3d d = Eigen::Vector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
+    const Eigen::Vector3d d =
+        Eigen::Vector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
     const Eigen::Vector3d q = Eigen::Vector3d(0.07, 0.0, 0.07) + 0.03 * d;
     if (q.z() <= 0.04) continue;
     p.row(count) = q.transpose();
@@ -51,9 +52,11 @@ Case make_case(double angle_degrees, unsigned seed) {
   std::uniform_real_distribution<double> offset(-0.1, 0.1);
   Case c;
   c.model = box_with_ball(6000, rng);
-  const Eigen::Vector3d axis = Eigen::Vector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
+  const Eigen::Vector3d axis =
+      Eigen::Vector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
   c.T_scene_model = Transform::Identity();
-  c.T_scene_model.topLeftCorner<3, 3>() = Eigen::AngleAxisd(angle_degrees * M_PI / 180.0, axis).toRotationMatrix();
+  c.T_scene_model.topLeftCorner<3, 3>() =
+      Eigen::AngleAxisd(angle_degrees * M_PI / 180.0, axis).toRotationMatrix();
   c.T_scene_model.topRightCorner<3, 1>() << offset(rng), offset(rng), offset(rng);
   const PointCloud resampled = box_with_ball(6000, rng);
   c.scene = resampled.transformed(c.T_scene_model);

@@ -53,7 +53,8 @@ TEST(PointCloud, TransformedRotatesNormalsAndMovesPoints) {
   p << 1, 0, 0;
   n << 1, 0, 0;
   Transform T = Transform::Identity();
-  T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.topLeftCorner<3, 3>() =
+      Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   T.topRightCorner<3, 1>() << 0, 0, 1;
   const PointCloud moved = PointCloud(p, n).transformed(T);
   EXPECT_NEAR((moved.points().row(0) - Eigen::RowVector3d(0, 1, 1)).norm(), 0.0, 1e-15);
@@ -182,7 +183,8 @@ TEST(Preprocessing, OutwardNormalsOfASphere) {
   params.threads = 2;
   const PointCloud with_normals = estimate_normals(PointCloud(p), params);
   for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    const double alignment = with_normals.normals().row(i).dot(with_normals.points().row(i).normalized());
+    const double alignment =
+        with_normals.normals().row(i).dot(with_normals.points().row(i).normalized());
     ASSERT_GT(alignment, 0.99) << "point " << i;
   }
 }
@@ -190,7 +192,7 @@ TEST(Preprocessing, OutwardNormalsOfASphere) {
 TEST(VoxelGrid, FftFriendlySizes) {
   EXPECT_EQ(fft_friendly_size(1), 2);
   EXPECT_EQ(fft_friendly_size(11), 12);
-  EXPECT_EQ(fft_friendly_size(55), 64);    // not 60: FFTW's estimated plan is slow there
+  EXPECT_EQ(fft_friendly_size(55), 64);  // not 60: FFTW's estimated plan is slow there
   EXPECT_EQ(fft_friendly_size(97), 100);
   EXPECT_EQ(fft_friendly_size(128), 128);
   EXPECT_EQ(fft_friendly_size(161), 200);
@@ -279,8 +281,8 @@ TEST(Egi, KnownDirectionsLandInTheirCells) {
   EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 0, 1), B), Eigen::Vector2i(0, 0));
   EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 0, -1), B), Eigen::Vector2i(2 * B - 1, 0));
   EXPECT_EQ(egi_cell(Eigen::Vector3d(1, 0, 0), B), Eigen::Vector2i(B, 0));
-  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 1, 0), B), Eigen::Vector2i(B, B / 2));      // phi = pi/2
-  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, -1, 0), B), Eigen::Vector2i(B, 3 * B / 2)); // phi = 3pi/2
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, 1, 0), B), Eigen::Vector2i(B, B / 2));       // phi = pi/2
+  EXPECT_EQ(egi_cell(Eigen::Vector3d(0, -1, 0), B), Eigen::Vector2i(B, 3 * B / 2));  // phi = 3pi/2
   // The node itself maps to its own cell for every node of the grid.
   for (int j = 0; j < 2 * B; ++j) {
     for (int k = 0; k < 2 * B; ++k) {
@@ -299,12 +301,14 @@ TEST(Egi, RotationAboutZByOneColumnShiftsColumnsByOne) {
     normals.row(i) = Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
   }
   for (int B : {4, 8, 16}) {
-    const Eigen::Matrix3d Rz = Eigen::AngleAxisd(M_PI / B, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    const Eigen::Matrix3d Rz =
+        Eigen::AngleAxisd(M_PI / B, Eigen::Vector3d::UnitZ()).toRotationMatrix();
     const Points rotated = normals * Rz.transpose();
     const SphereGrid before = egi_histogram(normals, B);
     const SphereGrid after = egi_histogram(rotated, B);
     for (int k = 0; k < 2 * B; ++k) {
-      ASSERT_TRUE(after.col((k + 1) % (2 * B)).isApprox(before.col(k))) << "B " << B << " column " << k;
+      ASSERT_TRUE(after.col((k + 1) % (2 * B)).isApprox(before.col(k)))
+          << "B " << B << " column " << k;
     }
   }
 }

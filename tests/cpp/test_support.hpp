@@ -42,7 +42,8 @@ inline PointCloud box_and_sphere(int samples, std::mt19937& rng) {
 }
 
 /// `cloud` with each point kept with probability `keep` and moved by Gaussian noise.
-inline PointCloud thin_and_jitter(const PointCloud& cloud, double keep, double sigma, std::mt19937& rng) {
+inline PointCloud thin_and_jitter(const PointCloud& cloud, double keep, double sigma,
+                                  std::mt19937& rng) {
   std::bernoulli_distribution kept(keep);
   std::normal_distribution<double> noise(0.0, sigma);
   Points points(cloud.size(), 3);

@@ -77,7 +77,8 @@ std::vector<double> subvoxel_errors(const PointCloud& cloud, Occupancy occupancy
   for (int trial = 0; trial < trials; ++trial) {
     const Eigen::Vector3d t(offset(rng), offset(rng), offset(rng));
     const PointCloud moving = test::thin_and_jitter(cloud, 0.7, 0.001, rng);
-    const PointCloud target = test::thin_and_jitter(cloud.transformed(test::translation(t)), 0.7, 0.001, rng);
+    const PointCloud target =
+        test::thin_and_jitter(cloud.transformed(test::translation(t)), 0.7, 0.001, rng);
     const GridSpec spec = make_grid_spec(bounding_box(moving), bounding_box(target), 0.008);
     PhaseCorrelation correlation(spec);
     correlation.set_target(voxelize(target, spec, occupancy));
@@ -117,7 +118,8 @@ INSTANTIATE_TEST_SUITE_P(Occupancies, SubvoxelAccuracy,
                          ::testing::Values(AccuracyCase{Occupancy::trilinear, 1.0},
                                            AccuracyCase{Occupancy::binary, 1.5}),
                          [](const auto& info) {
-                           return info.param.occupancy == Occupancy::binary ? "binary" : "trilinear";
+                           return info.param.occupancy == Occupancy::binary ? "binary"
+                                                                            : "trilinear";
                          });
 
 TEST(PhaseCorrelation, IntegerPeakAloneIsOffByUpToHalfAVoxel) {
@@ -125,11 +127,13 @@ TEST(PhaseCorrelation, IntegerPeakAloneIsOffByUpToHalfAVoxel) {
   std::mt19937 rng(14);
   const PointCloud shape = test::box_and_sphere(8000, rng);
   const Eigen::Vector3d t(0.004, -0.004, 0.0035);  // half a voxel on each axis
-  const GridSpec spec = make_grid_spec(bounding_box(shape), bounding_box(shape.transformed(test::translation(t))), 0.008);
+  const GridSpec spec = make_grid_spec(
+      bounding_box(shape), bounding_box(shape.transformed(test::translation(t))), 0.008);
   PhaseCorrelationParams integer_only;
   integer_only.subvoxel = false;
   const VoxelGrid moving = voxelize(shape, spec, Occupancy::trilinear);
-  const VoxelGrid target = voxelize(shape.transformed(test::translation(t)), spec, Occupancy::trilinear);
+  const VoxelGrid target =
+      voxelize(shape.transformed(test::translation(t)), spec, Occupancy::trilinear);
   const auto coarse = phase_correlation(moving, target, integer_only);
   const auto fine = phase_correlation(moving, target);
   EXPECT_GT(1000.0 * (coarse.shift - t).norm(), 4.0);
@@ -229,7 +233,8 @@ TEST(PhaseCorrelation, RefusesMisuse) {
   GridSpec other = spec;
   other.dims = {16, 16, 8};
   std::mt19937 seed2(5);
-  const VoxelGrid wrong = random_grid(other, {4, 4, 2}, {12, 12, 6}, Eigen::Vector3i::Zero(), seed2);
+  const VoxelGrid wrong =
+      random_grid(other, {4, 4, 2}, {12, 12, 6}, Eigen::Vector3i::Zero(), seed2);
   EXPECT_THROW(correlation.set_target(wrong), std::invalid_argument);
   PhaseCorrelationParams bad;
   bad.subvoxel_band = 0.7;

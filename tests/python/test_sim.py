@@ -180,6 +180,53 @@ def test_noisy_plane_normals_stay_close(at_home):
     assert np.median(angle_deg(cloud.normals, up_in_camera)) < 2.0
 
 
+def rough_depth(rng: np.random.Generator) -> np.ndarray:
+    """A 120 x 160 depth image with slopes, steps (silhouettes), noise and holes."""
+    v, u = np.mgrid[0:120, 0:160]
+    depth = 0.6 + 0.002 * u - 0.001 * v + 0.01 * np.sin(u / 7.0) * np.cos(v / 5.0)
+    depth[30:70, 40:90] -= 0.2  # a box nearer the camera
+    depth += rng.normal(0.0, 0.0005, depth.shape)
+    depth[rng.random(depth.shape) < 0.02] = np.nan
+    depth[:, 150:] = np.nan  # nothing seen at the right edge
+    return depth
+
+
+@pytest.mark.parametrize("stride", [1, 2, 3])
+def test_depth_to_cloud_is_the_numpy_reference(stride):
+    # The core's organized_cloud against back_project + organized_normals in float64,
+    # the same pixels and the same values.
+    depth = rough_depth(np.random.default_rng(stride))
+    params = sim.NormalParams(stride=stride)
+    cloud = sim.depth_to_cloud(depth, SMALL, params)
+    points = sim.back_project(depth, SMALL)
+    normals = sim.organized_normals(points, params, np.float64)
+    points = points[::stride, ::stride].reshape(-1, 3)
+    normals = normals[::stride, ::stride].reshape(-1, 3)
+    keep = np.isfinite(normals[:, 0])
+    assert keep.sum() > 0.5 * len(keep)
+    assert len(cloud) == keep.sum()
+    np.testing.assert_allclose(cloud.points, points[keep], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(cloud.normals, normals[keep], rtol=0, atol=1e-6)
+    # The float32 default of the reference is within 1e-4 of it.
+    single = sim.organized_normals(sim.back_project(depth, SMALL), params)
+    single = single[::stride, ::stride].reshape(-1, 3)[keep]
+    np.testing.assert_allclose(cloud.normals, single, rtol=0, atol=1e-4)
+
+
+def test_organized_cloud_refuses_bad_arguments():
+    depth = np.full((20, 30), 1.0)
+    with pytest.raises(ValueError, match="2-D"):
+        svs._core.organized_cloud(np.ones(5), 100.0, 100.0, 10.0, 10.0)
+    with pytest.raises(ValueError, match="floats"):
+        svs._core.organized_cloud(np.ones((5, 5), dtype=int), 100.0, 100.0, 10.0, 10.0)
+    with pytest.raises(ValueError, match="fx"):
+        svs._core.organized_cloud(depth, 0.0, 100.0, 10.0, 10.0)
+    with pytest.raises(ValueError, match="window"):
+        svs._core.organized_cloud(depth, 100.0, 100.0, 10.0, 10.0, window=2)
+    with pytest.raises(ValueError, match="shape"):
+        sim.depth_to_cloud(depth, SMALL)
+
+
 # --- Robot ---------------------------------------------------------------------------------
 
 

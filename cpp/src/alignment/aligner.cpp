@@ -4,6 +4,8 @@
 #include <spectral_vs/rotation/so3_correlation.hpp>
 #include <spectral_vs/rotation/so3_search.hpp>
 
+#include "alignment/align_detail.hpp"
+#include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
 
@@ -17,6 +19,7 @@
 namespace spectral_vs {
 
 using detail::fail;
+using detail::RangeImage;
 using detail::SceneMap;
 using detail::SceneTranslation;
 using detail::TranslationWindow;
@@ -82,7 +85,7 @@ struct Pose {
 
 // The model as Algorithm 1 moves it, rotating about its centroid.
 class MovingModel {
-public:
+ public:
   explicit MovingModel(const PointCloud& model)
       : centroid_(model.centroid()),
         centred_(model.points().rowwise() - centroid_.transpose()),
@@ -91,6 +94,21 @@ public:
   }
 
   double reach() const { return reach_; }
+
+  // Where the centroid of the model's side facing `direction` (a viewing ray) is, from
+  // the model's centroid, with the model turned by R: a single view shows that side.
+  Eigen::Vector3d facing_side(const Eigen::Matrix3d& R, const Eigen::Vector3d& direction) const {
+    const Eigen::Vector3d local = R.transpose() * direction;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    int count = 0;
+    for (Eigen::Index i = 0; i < centred_.rows(); ++i) {
+      if (normals_.row(i).dot(local) < 0.0) {
+        sum += centred_.row(i).transpose();
+        ++count;
+      }
+    }
+    return count ? Eigen::Vector3d(R * sum / double(count)) : Eigen::Vector3d::Zero();
+  }
   const Eigen::Vector3d& centroid() const { return centroid_; }
   Eigen::Vector3d centre(const Pose& pose) const { return centroid_ + pose.offset; }
 
@@ -115,16 +133,17 @@ public:
     return moved_;
   }
 
-  // The model's points and normals at `pose`, scored against the scene: those facing
-  // the scene's viewpoint only, when the scene is a single view from there.
-  double fitness(const SceneMap& scene, const Pose& pose, const std::optional<Eigen::Vector3d>& viewpoint) {
+  // The model's points and normals at `pose`, scored against the scene; against what
+  // its sensor saw, with depths within `tolerance` metres, when the scene is one view.
+  double fitness(const SceneMap& scene, const RangeImage* view, const Pose& pose,
+                 double tolerance) {
     moved_normals_.noalias() = normals_ * pose.R.transpose();
     const Points& moved = move(pose);
-    return viewpoint ? scene.visible_fitness(moved, moved_normals_, *viewpoint)
-                     : scene.fitness(moved, moved_normals_);
+    return view ? view->check(moved, moved_normals_, tolerance).fitness()
+                : scene.fitness(moved, moved_normals_);
   }
 
-private:
+ private:
   Eigen::Vector3d centroid_;
   Points centred_;
   Points normals_;
@@ -146,7 +165,8 @@ Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& para
 }
 
 Eigen::AlignedBox3d box_of(const Points& points) {
-  return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(), points.colwise().maxCoeff().transpose());
+  return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(),
+                             points.colwise().maxCoeff().transpose());
 }
 
 double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params) {
@@ -168,11 +188,13 @@ using Clock = std::chrono::steady_clock;
 // and moves to a window once the translation steps fit in it.
 struct Problem {
   const SceneMap& scene;
+  const RangeImage* view;  // the scene's range image, for a single view (scene_viewpoint)
   MovingModel& model;
   const ShCoefficients& model_coefficients;
   const AlignParams& params;
   double margin;
-  Clock::time_point deadline = Clock::time_point::max();  // of params.max_seconds
+  Clock::time_point deadline = Clock::time_point::max();    // of params.max_seconds
+  std::optional<Eigen::Vector3d> flat_axis = std::nullopt;  // of the model's EGI, if it has one
 };
 
 // The time limit of params.max_seconds from `start` (none for 0).
@@ -199,8 +221,9 @@ void place_window(const Problem& problem, std::optional<TranslationWindow>& wind
     window->place(centre);
     return;
   }
-  window.emplace(problem.scene, problem.model.reach(), problem.margin, centre, problem.params.voxel_size,
-                 problem.params.occupancy, phase_params(problem.params), problem.params.limits);
+  window.emplace(problem.scene, problem.model.reach(), problem.margin, centre,
+                 problem.params.voxel_size, problem.params.occupancy, phase_params(problem.params),
+                 problem.params.limits);
 }
 
 // Algorithm 1 (eq. 16-17) from `pose` until the stop rule or max_iterations. The
@@ -208,7 +231,8 @@ void place_window(const Problem& problem, std::optional<TranslationWindow>& wind
 // until the steps fit in a window, from `whole_scene` (the paper's mode).
 AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
                            const ShCoefficients& scene_coefficients, Pose pose,
-                           std::optional<TranslationWindow>& window, SceneTranslation* whole_scene) {
+                           std::optional<TranslationWindow>& window,
+                           SceneTranslation* whole_scene) {
   const AlignParams& params = problem.params;
   const bool newton = params.rotation_step == RotationStep::newton;
   if (!whole_scene) place_window(problem, window, problem.model.centre(pose));
@@ -219,19 +243,22 @@ AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
     pose.R = pose.R * exp_so3(rotation_step(c, params));
 
     const Points& moved = problem.model.move(pose);
-    const TranslationEstimate shift = whole_scene ? whole_scene->estimate(moved) : window->estimate(moved);
+    const TranslationEstimate shift =
+        whole_scene ? whole_scene->estimate(moved) : window->estimate(moved);
     const Eigen::Vector3d step = params.translation_gain * shift.shift;
     pose.offset += step;
 
     AlignIteration record;
-    record.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    record.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     record.translation_step = step.norm() / params.voxel_size;
     record.rotation_gradient = c.gradient.norm();
     record.correlation = c.value;
     record.translation_peak = shift.peak;
-    record.translation_cost = whole_scene ? whole_scene->translation_cost() : window->translation_cost();
-    record.rotation_cost =
-        rotation_cost(scene_coefficients, problem.model_coefficients, pose.R, params.bandwidth, true);
+    record.translation_cost =
+        whole_scene ? whole_scene->translation_cost() : window->translation_cost();
+    record.rotation_cost = rotation_cost(scene_coefficients, problem.model_coefficients, pose.R,
+                                         params.bandwidth, true);
     record.T_scene_model = problem.model.transform_of(pose);
     result.history.push_back(record);
     result.iterations = iteration + 1;
@@ -253,7 +280,7 @@ AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
     }
   }
   result.T_scene_model = problem.model.transform_of(pose);
-  result.fitness = problem.model.fitness(problem.scene, pose, problem.params.scene_viewpoint);
+  result.fitness = problem.model.fitness(problem.scene, problem.view, pose, params.voxel_size);
   result.correlation = correlation.evaluate(pose.R).value;
   result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
   if (!whole_scene) result.window_dims = window->dims();
@@ -262,14 +289,16 @@ AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
 
 // The EGI of the scene points in a window: in clutter, the object's own normals
 // rather than the whole scene's.
-std::optional<ShCoefficients> window_coefficients(const SceneMap& scene, const Eigen::Vector3d& centre,
-                                                  double half_width, const AlignParams& params) {
+std::optional<ShCoefficients> window_coefficients(const SceneMap& scene,
+                                                  const Eigen::Vector3d& centre, double half_width,
+                                                  const AlignParams& params) {
   const Eigen::AlignedBox3d box(centre - Eigen::Vector3d::Constant(half_width),
                                 centre + Eigen::Vector3d::Constant(half_width));
   const std::vector<Eigen::Index> rows = scene.points_in(box);
   if (rows.size() < 3) return std::nullopt;
   Points normals(static_cast<Eigen::Index>(rows.size()), 3);
-  for (std::size_t i = 0; i < rows.size(); ++i) normals.row(Eigen::Index(i)) = scene.cloud().normals().row(rows[i]);
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    normals.row(Eigen::Index(i)) = scene.cloud().normals().row(rows[i]);
   return egi_coefficients(normals, params.bandwidth, params.egi_method);
 }
 
@@ -283,7 +312,8 @@ struct Hypothesis {
 // correlation and placed by a phase correlation over the whole scene (coarse voxels),
 // ranked by fitness.
 std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation& correlation,
-                                          const ShCoefficients& scene_coefficients, double search_voxel) {
+                                          const ShCoefficients& scene_coefficients,
+                                          double search_voxel) {
   const AlignParams& params = problem.params;
   So3SearchParams search;
   search.candidates = params.hypotheses;
@@ -291,8 +321,8 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
   const auto candidates =
       so3_search(scene_coefficients, problem.model_coefficients, params.bandwidth, search);
   const Eigen::Vector3d start = problem.scene.cloud().centroid();
-  SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel, params.occupancy,
-                          phase_params(params), params.limits);
+  SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel,
+                          params.occupancy, phase_params(params), params.limits);
   RotationRefineParams refine;
   refine.newton = params.rotation_step == RotationStep::newton;
   std::vector<Hypothesis> hypotheses;
@@ -303,7 +333,8 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
     hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
     hypothesis.pose.offset = start - problem.model.centroid();
     hypothesis.pose.offset += coarse.estimate(problem.model.move(hypothesis.pose)).shift;
-    hypothesis.fitness = problem.model.fitness(problem.scene, hypothesis.pose, problem.params.scene_viewpoint);
+    hypothesis.fitness =
+        problem.model.fitness(problem.scene, problem.view, hypothesis.pose, search_voxel);
     hypotheses.push_back(hypothesis);
   }
   std::stable_sort(hypotheses.begin(), hypotheses.end(),
@@ -311,8 +342,131 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
   return hypotheses;
 }
 
+// A connected part of the scene that could be the object, or the part of it a view
+// shows: at least kPartMinPoints points, no smaller than a quarter of the model's reach
+// and no larger than two of its diameters (two objects touching).
+constexpr std::size_t kPartMinPoints = 30;
+// Points this many voxels apart are in one part: the scene comes downsampled to half a
+// voxel, and objects a few millimetres apart stay apart.
+constexpr double kPartTolerance = 0.75;
+constexpr std::size_t kMaxParts = 8;
+
+std::vector<std::vector<Eigen::Index>> object_parts(
+    const PointCloud& searched, const std::optional<detail::SupportPlane>& plane, double reach,
+    double voxel_size) {
+  // Without the points near the plane (their normals tilted at the objects' feet) that
+  // would join every object into one part, or below it.
+  std::vector<Eigen::Index> above;
+  for (Eigen::Index i = 0; i < searched.points().rows(); ++i) {
+    if (!plane || searched.points().row(i).dot(plane->normal) - plane->offset > 1.5 * voxel_size)
+      above.push_back(i);
+  }
+  Points points(Eigen::Index(above.size()), 3);
+  for (std::size_t i = 0; i < above.size(); ++i)
+    points.row(Eigen::Index(i)) = searched.points().row(above[i]);
+  const auto plausible = [&](const std::vector<Eigen::Index>& part) {
+    Eigen::AlignedBox3d box;
+    for (const Eigen::Index i : part) box.extend(searched.points().row(i).transpose());
+    const double size = box.sizes().norm();
+    return size >= 0.25 * reach && size <= 4.0 * reach;
+  };
+  std::vector<std::vector<Eigen::Index>> kept;
+  for (auto& part : detail::connected_parts(points, kPartTolerance * voxel_size)) {
+    if (part.size() < kPartMinPoints || kept.size() == kMaxParts) break;
+    for (Eigen::Index& i : part) i = above[std::size_t(i)];
+    if (plausible(part)) kept.push_back(std::move(part));
+  }
+  // A view of one object that its depth edges cut in parts: the parts, and the whole.
+  if (kept.size() != 1 && plausible(above)) kept.insert(kept.begin(), std::move(above));
+  return kept;
+}
+
+// Beyond the paper: in clutter the EGI of the whole scene mixes every object's normals,
+// and its best rotations are mostly other objects'. Per connected part of the scene that
+// could be the object, the SO(3) search runs on the part's own EGI, and its rotations are
+// placed by phase correlation in a window around the part at the alignment's voxel.
+std::vector<Hypothesis> part_hypotheses(const Problem& problem,
+                                        const std::vector<std::vector<Eigen::Index>>& parts,
+                                        int per_part, std::optional<TranslationWindow>& window) {
+  const AlignParams& params = problem.params;
+  const PointCloud& scene = problem.scene.cloud();
+  So3SearchParams search;
+  search.candidates = per_part;
+  search.threads = params.threads;
+  RotationRefineParams refine;
+  refine.newton = params.rotation_step == RotationStep::newton;
+  std::vector<Hypothesis> hypotheses;
+  for (const auto& part : parts) {
+    if (!hypotheses.empty() && expired(problem)) break;
+    Points normals(Eigen::Index(part.size()), 3);
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < part.size(); ++i) {
+      normals.row(Eigen::Index(i)) = scene.normals().row(part[i]);
+      centroid += scene.points().row(part[i]).transpose();
+    }
+    centroid /= double(part.size());
+    const ShCoefficients coefficients =
+        egi_coefficients(normals, params.bandwidth, params.egi_method);
+    std::optional<So3Correlation> correlation;
+    try {
+      correlation.emplace(coefficients, problem.model_coefficients, params.bandwidth, true);
+    } catch (const std::invalid_argument&) {
+      continue;  // a part whose normals have no structure
+    }
+    place_window(problem, window, centroid);
+    for (const RotationCandidate& candidate :
+         so3_search(coefficients, problem.model_coefficients, params.bandwidth, search)) {
+      Hypothesis hypothesis;
+      hypothesis.index = int(hypotheses.size());
+      hypothesis.pose.R = refine_rotation(*correlation, candidate.R, refine).R;
+      hypothesis.pose.offset = centroid - problem.model.centroid();
+      if (params.scene_viewpoint) {
+        hypothesis.pose.offset -=
+            problem.model.facing_side(hypothesis.pose.R, centroid - *params.scene_viewpoint);
+      }
+      // Twice: the first shift brings the model near enough for the second to be exact.
+      for (int k = 0; k < 2; ++k)
+        hypothesis.pose.offset += window->estimate(problem.model.move(hypothesis.pose)).shift;
+      hypothesis.fitness =
+          problem.model.fitness(problem.scene, problem.view, hypothesis.pose, params.voxel_size);
+      hypotheses.push_back(hypothesis);
+    }
+  }
+  std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+  return hypotheses;
+}
+
+// For a model whose EGI has a flat axis (see flat_axis below), the EGI cannot tell its
+// turns about that axis apart, but the scene can: the best-ranked hypotheses are turned
+// to the fittest of the turns every kFlatAxisStep, scored with depths within `tolerance`.
+constexpr std::size_t kTurnedHypotheses = 16;
+
+void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypotheses,
+                          double tolerance) {
+  if (!problem.flat_axis) return;
+  const int turns = static_cast<int>(std::lround(2.0 * M_PI / kFlatAxisStep));
+  const std::size_t count = std::min(kTurnedHypotheses, hypotheses.size());
+  for (std::size_t h = 0; h < count; ++h) {
+    Hypothesis& hypothesis = hypotheses[h];
+    const Pose start = hypothesis.pose;
+    for (int k = 1; k < turns; ++k) {
+      Pose trial = start;
+      trial.R = start.R * exp_so3(double(k) * kFlatAxisStep * *problem.flat_axis);
+      const double fitness = problem.model.fitness(problem.scene, problem.view, trial, tolerance);
+      if (fitness > hypothesis.fitness) {
+        hypothesis.fitness = fitness;
+        hypothesis.pose = trial;
+      }
+    }
+  }
+  std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+}
+
 // Re-places `trial`'s translation by phase correlation in the window; its voxel overlap.
-double placed_overlap(const Problem& problem, TranslationWindow& window, Pose& trial, int& evaluations) {
+double placed_overlap(const Problem& problem, TranslationWindow& window, Pose& trial,
+                      int& evaluations) {
   trial.offset += window.estimate(problem.model.move(trial)).shift;
   ++evaluations;
   return window.overlap(problem.model.move(trial));
@@ -327,7 +481,9 @@ double placed_overlap(const Problem& problem, TranslationWindow& window, Pose& t
 // parabola per axis, whose vertex is tried as one combined step; the best trial wins.
 Pose polish(const Problem& problem, TranslationWindow& window, Pose pose, int& evaluations) {
   window.follow(problem.model.centre(pose));
-  const auto place = [&](Pose& trial) { return placed_overlap(problem, window, trial, evaluations); };
+  const auto place = [&](Pose& trial) {
+    return placed_overlap(problem, window, trial, evaluations);
+  };
   double best = place(pose);
   int rounds_at_first_step = 0;
   for (double step = kPolishFirstStep; step >= kPolishLastStep;) {
@@ -346,7 +502,8 @@ Pose polish(const Problem& problem, TranslationWindow& window, Pose pose, int& e
         }
       }
       const double curvature = peaks[0] + peaks[1] - 2.0 * best;
-      if (curvature < 0.0) vertex[axis] = std::clamp(0.5 * step * (peaks[0] - peaks[1]) / curvature, -step, step);
+      if (curvature < 0.0)
+        vertex[axis] = std::clamp(0.5 * step * (peaks[0] - peaks[1]) / curvature, -step, step);
     }
     Pose combined = pose;
     combined.R = pose.R * exp_so3(vertex);
@@ -362,7 +519,8 @@ Pose polish(const Problem& problem, TranslationWindow& window, Pose pose, int& e
     }
     // The first step size walks on while it improves (a pose a few steps off, such as a
     // mug turned about its axis); the finer ones refine once each.
-    if (!(improved && step == kPolishFirstStep && ++rounds_at_first_step < kPolishFirstStepRounds)) step *= 0.5;
+    if (!(improved && step == kPolishFirstStep && ++rounds_at_first_step < kPolishFirstStepRounds))
+      step *= 0.5;
   }
   return pose;
 }
@@ -370,11 +528,12 @@ Pose polish(const Problem& problem, TranslationWindow& window, Pose pose, int& e
 // Algorithm 1 from a hypothesis, in a window of the scene around it, on the EGI of the
 // scene inside that window.
 AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_correlation,
-                              const ShCoefficients& scene_coefficients, const Hypothesis& hypothesis,
+                              const ShCoefficients& scene_coefficients,
+                              const Hypothesis& hypothesis,
                               std::optional<TranslationWindow>& window) {
   const double half_width = problem.model.reach() + problem.margin;
-  const auto local = window_coefficients(problem.scene, problem.model.centre(hypothesis.pose), half_width,
-                                         problem.params);
+  const auto local = window_coefficients(problem.scene, problem.model.centre(hypothesis.pose),
+                                         half_width, problem.params);
   std::optional<So3Correlation> local_correlation;
   if (local) {
     try {
@@ -385,8 +544,17 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   }
   So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
   const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
-  AlignResult result = run_algorithm1(problem, correlation, coefficients, hypothesis.pose, window, nullptr);
+  AlignResult result =
+      run_algorithm1(problem, correlation, coefficients, hypothesis.pose, window, nullptr);
   result.hypothesis = hypothesis.index;
+  // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
+  // walk off a right hypothesis: the fitter of the two poses is kept.
+  const double start_fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
+                                                     problem.params.voxel_size);
+  if (start_fitness > result.fitness) {
+    result.T_scene_model = problem.model.transform_of(hypothesis.pose);
+    result.fitness = start_fitness;
+  }
   return result;
 }
 
@@ -447,12 +615,14 @@ Pose sweep_flat_axis(const Problem& problem, TranslationWindow& window, const Po
 void polish_result(const Problem& problem, const std::optional<Eigen::Vector3d>& axis,
                    std::optional<TranslationWindow>& window, AlignResult& result) {
   Pose start = problem.model.pose_of(result.T_scene_model);
-  if (points_per_voxel(problem.model.move(start), problem.params.voxel_size) < kPolishMinDensity) return;
+  if (points_per_voxel(problem.model.move(start), problem.params.voxel_size) < kPolishMinDensity)
+    return;
   place_window(problem, window, problem.model.centre(start));
   if (axis) start = sweep_flat_axis(problem, *window, start, *axis, result.polish_evaluations);
   const Pose polished = polish(problem, *window, start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
-  result.fitness = problem.model.fitness(problem.scene, polished, problem.params.scene_viewpoint);
+  result.fitness =
+      problem.model.fitness(problem.scene, problem.view, polished, problem.params.voxel_size);
 }
 
 bool better(const AlignResult& a, const AlignResult& b) {
@@ -461,6 +631,16 @@ bool better(const AlignResult& a, const AlignResult& b) {
 }
 
 }  // namespace
+
+namespace detail {
+
+void check_align_params(const AlignParams& params) { check_params(params); }
+
+Eigen::Vector3d align_rotation_step(const CorrelationValue& c, const AlignParams& params) {
+  return rotation_step(c, params);
+}
+
+}  // namespace detail
 
 AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignParams& params) {
   require_non_empty(model, "model");
@@ -472,37 +652,59 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   MovingModel moving(model);
   // Beyond the paper: a table under the objects dominates both the scene's EGI and its
   // voxel grid; searched without it, the object stands out. Fitness still sees it.
-  const PointCloud searched = params.global_search && params.suppress_support_plane
-                                  ? detail::without_support_plane(scene, params.voxel_size, 4.0 * moving.reach())
-                                  : scene;
+  std::optional<detail::SupportPlane> plane;
+  if (params.global_search && params.suppress_support_plane) {
+    plane = detail::support_plane(scene, params.voxel_size, 4.0 * moving.reach());
+  }
+  const PointCloud searched =
+      plane ? detail::without_support_plane(scene, params.voxel_size, 4.0 * moving.reach()) : scene;
   const SceneMap scene_map(searched, scene, params.voxel_size, params.limits);
-  const ShCoefficients model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
-  const ShCoefficients scene_coefficients = egi_coefficients(searched, params.bandwidth, params.egi_method);
+  const ShCoefficients model_coefficients =
+      egi_coefficients(model, params.bandwidth, params.egi_method);
+  const ShCoefficients scene_coefficients =
+      egi_coefficients(searched, params.bandwidth, params.egi_method);
   So3Correlation correlation(scene_coefficients, model_coefficients, params.bandwidth, true);
+  // Half-voxel pixels: a model point a voxel in front of or behind the scan is resolved.
+  std::optional<RangeImage> view;
+  if (params.scene_viewpoint) view.emplace(scene, *params.scene_viewpoint, 0.5 * params.voxel_size);
+  const RangeImage* view_ptr = view ? &*view : nullptr;
 
   if (!params.global_search) {
-    const Problem problem{scene_map, moving, model_coefficients, params, window_margin(0.0, params), deadline};
+    const Problem problem{
+        scene_map, view_ptr, moving, model_coefficients, params, window_margin(0.0, params),
+        deadline};
     const Pose start = moving.pose_of(params.initial_guess);
     SceneTranslation whole_scene =
         params.max_translation > 0.0
             ? SceneTranslation(scene_map, box_of(moving.move(start)), params.max_translation,
-                               params.voxel_size, params.occupancy, phase_params(params), params.limits)
+                               params.voxel_size, params.occupancy, phase_params(params),
+                               params.limits)
             : SceneTranslation(scene_map, moving.centre(start), moving.reach(), params.voxel_size,
                                params.occupancy, phase_params(params), params.limits);
     std::optional<TranslationWindow> window;
     return run_algorithm1(problem, correlation, scene_coefficients, start, window, &whole_scene);
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
-  const Problem problem{scene_map, moving, model_coefficients, params, window_margin(search_voxel, params),
-                        deadline};
-  const std::vector<Hypothesis> hypotheses =
-      global_hypotheses(problem, correlation, scene_coefficients, search_voxel);
-  AlignResult best;
+  const std::optional<Eigen::Vector3d> axis = flat_axis(model_coefficients, params.bandwidth);
+  const Problem problem{scene_map,          view_ptr, moving,
+                        model_coefficients, params,   window_margin(search_voxel, params),
+                        deadline,           axis};
   std::optional<TranslationWindow> window;
+  std::vector<std::vector<Eigen::Index>> parts;
+  if (plane) parts = object_parts(searched, plane, moving.reach(), params.voxel_size);
+  std::vector<Hypothesis> hypotheses;
+  if (parts.empty()) {
+    hypotheses = global_hypotheses(problem, correlation, scene_coefficients, search_voxel);
+  } else {
+    hypotheses = part_hypotheses(problem, parts, std::max(1, params.hypotheses / 2), window);
+    turn_about_flat_axis(problem, hypotheses, params.voxel_size);
+  }
+  AlignResult best;
   const int runs = std::min<int>(params.refinements, static_cast<int>(hypotheses.size()));
   bool out_of_time = false;
   for (int i = 0; i < runs && !out_of_time; ++i) {
-    AlignResult result = refine_hypothesis(problem, correlation, scene_coefficients, hypotheses[i], window);
+    AlignResult result =
+        refine_hypothesis(problem, correlation, scene_coefficients, hypotheses[i], window);
     out_of_time = result.stop_reason == AlignStopReason::max_seconds || expired(problem);
     if (i == 0 || better(result, best)) best = std::move(result);
   }
@@ -511,7 +713,7 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     best.converged = false;
     best.stop_reason = AlignStopReason::max_seconds;
   } else if (params.polish) {
-    polish_result(problem, flat_axis(model_coefficients, params.bandwidth), window, best);
+    polish_result(problem, axis, window, best);
   }
   best.search_voxel_size = search_voxel;
   return best;

@@ -5,23 +5,28 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numeric>
+#include <unordered_map>
 
 namespace spectral_vs::detail {
 
 namespace {
 
 Eigen::AlignedBox3d cube(const Eigen::Vector3d& centre, double half_width) {
-  return {centre - Eigen::Vector3d::Constant(half_width), centre + Eigen::Vector3d::Constant(half_width)};
+  return {centre - Eigen::Vector3d::Constant(half_width),
+          centre + Eigen::Vector3d::Constant(half_width)};
 }
 
 std::size_t linear(const GridSpec& spec, const Eigen::Vector3i& v) {
   return (std::size_t(v.x()) * spec.dims.y() + v.y()) * spec.dims.z() + v.z();
 }
 
-void voxelize_subset(const PointCloud& cloud, const std::vector<Eigen::Index>& rows, const GridSpec& spec,
-                     Occupancy occupancy, VoxelGrid& grid, const GridLimits& limits) {
+void voxelize_subset(const PointCloud& cloud, const std::vector<Eigen::Index>& rows,
+                     const GridSpec& spec, Occupancy occupancy, VoxelGrid& grid,
+                     const GridLimits& limits) {
   Points points(static_cast<Eigen::Index>(rows.size()), 3);
-  for (std::size_t i = 0; i < rows.size(); ++i) points.row(Eigen::Index(i)) = cloud.points().row(rows[i]);
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    points.row(Eigen::Index(i)) = cloud.points().row(rows[i]);
   voxelize_into(points, spec, occupancy, grid, limits);
 }
 
@@ -77,8 +82,8 @@ int voxels_along(double length, double voxel_size, const GridLimits& limits) {
   const double n = std::ceil(length / voxel_size);
   const double limit = std::min(double(limits.max_voxels), double(kMaxGridIndex) / 2);
   if (!(n <= limit)) {
-    fail("voxel_size: ", length, " m is ", n, " voxels of ", voxel_size, " m along an axis, over the limit of ",
-         limit, " voxels (max_voxels)");
+    fail("voxel_size: ", length, " m is ", n, " voxels of ", voxel_size,
+         " m along an axis, over the limit of ", limit, " voxels (max_voxels)");
   }
   return static_cast<int>(n);
 }
@@ -104,7 +109,8 @@ SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double v
     const std::uint32_t mask = direction_mask(evidence.normals().row(i).transpose());
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] |= mask;
+        for (int dz = -1; dz <= 1; ++dz)
+          near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] |= mask;
   }
 }
 
@@ -115,7 +121,8 @@ double SceneMap::fitness(const Points& points, const Points& normals) const {
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     const Eigen::Vector3i v = spec_.index_of(points.row(i).transpose());
     const Eigen::Array3i c = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
-    const std::uint64_t key = (std::uint64_t(c.x()) << 42) | (std::uint64_t(c.y()) << 21) | std::uint64_t(c.z());
+    const std::uint64_t key =
+        (std::uint64_t(c.x()) << 42) | (std::uint64_t(c.y()) << 21) | std::uint64_t(c.z());
     seen_.emplace_back(key, nearest_direction(normals.row(i).transpose()));
   }
   std::sort(seen_.begin(), seen_.end());
@@ -126,26 +133,12 @@ double SceneMap::fitness(const Points& points, const Points& normals) const {
                             int(key & 0x1FFFFF) - (1 << 20));
     const std::uint32_t mask = spec_.contains(v) ? near_[linear(spec_, v)] : 0u;
     bool support = false;
-    for (; i < seen_.size() && seen_[i].first == key; ++i) support |= (mask >> seen_[i].second) & 1u;
+    for (; i < seen_.size() && seen_[i].first == key; ++i)
+      support |= (mask >> seen_[i].second) & 1u;
     ++voxels;
     supported += support;
   }
   return voxels ? double(supported) / double(voxels) : 0.0;
-}
-
-double SceneMap::visible_fitness(const Points& points, const Points& normals,
-                                 const Eigen::Vector3d& viewpoint) const {
-  std::vector<Eigen::Index> rows;
-  for (Eigen::Index i = 0; i < points.rows(); ++i) {
-    if (normals.row(i).dot(viewpoint.transpose() - points.row(i)) > 0.0) rows.push_back(i);
-  }
-  if (rows.empty()) return 0.0;
-  Points p(Eigen::Index(rows.size()), 3), n(Eigen::Index(rows.size()), 3);
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    p.row(Eigen::Index(i)) = points.row(rows[i]);
-    n.row(Eigen::Index(i)) = normals.row(rows[i]);
-  }
-  return fitness(p, n);
 }
 
 std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) const {
@@ -175,8 +168,9 @@ GridSpec window_spec(double half_width, double voxel_size, const GridLimits& lim
 }  // namespace
 
 TranslationWindow::TranslationWindow(const SceneMap& scene, double reach, double margin,
-                                     const Eigen::Vector3d& centre, double voxel_size, Occupancy occupancy,
-                                     const PhaseCorrelationParams& params, const GridLimits& limits)
+                                     const Eigen::Vector3d& centre, double voxel_size,
+                                     Occupancy occupancy, const PhaseCorrelationParams& params,
+                                     const GridLimits& limits)
     : scene_(&scene),
       occupancy_(occupancy),
       limits_(limits),
@@ -234,11 +228,12 @@ namespace {
 
 // The grid over `cover`, with a voxel of room on each side, in FFT-friendly sizes of at
 // least `min_dims`.
-GridSpec covering_spec(const Eigen::AlignedBox3d& cover, const Eigen::Vector3i& min_dims, double voxel_size,
-                       const GridLimits& limits) {
+GridSpec covering_spec(const Eigen::AlignedBox3d& cover, const Eigen::Vector3i& min_dims,
+                       double voxel_size, const GridLimits& limits) {
   GridSpec spec;
   spec.resolution = voxel_size;
-  const Eigen::Vector3d origin = ((cover.min() / voxel_size).array().floor() - 1.0).matrix() * voxel_size;
+  const Eigen::Vector3d origin =
+      ((cover.min() / voxel_size).array().floor() - 1.0).matrix() * voxel_size;
   for (int axis = 0; axis < 3; ++axis) {
     const int needed = voxels_along(cover.max()[axis] - origin[axis], voxel_size, limits) + 2;
     spec.dims[axis] = fft_friendly_size(std::max(min_dims[axis], needed));
@@ -251,8 +246,8 @@ GridSpec covering_spec(const Eigen::AlignedBox3d& cover, const Eigen::Vector3i& 
   return spec;
 }
 
-GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
-                    const GridLimits& limits) {
+GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double reach,
+                    double voxel_size, const GridLimits& limits) {
   const Eigen::AlignedBox3d scene_box = bounding_box(scene.cloud());
   const Eigen::AlignedBox3d hull = cube(start, reach);
   const GridSpec minimum = make_grid_spec(hull, scene_box, voxel_size, limits);
@@ -263,34 +258,42 @@ GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double 
   return covering_spec(cover, minimum.dims, voxel_size, limits);
 }
 
-GridSpec bounded_scene_spec(const SceneMap& scene, const Eigen::AlignedBox3d& model_box, double max_translation,
-                            double voxel_size, const GridLimits& limits) {
+GridSpec bounded_scene_spec(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
+                            double max_translation, double voxel_size, const GridLimits& limits) {
   Eigen::AlignedBox3d cover = bounding_box(scene.cloud());
   cover.extend(model_box);
-  cover.min().array() -= max_translation;
+  // The grid is circular: max_translation of room once, past the far side, keeps every
+  // shift of up to max_translation either way from wrapping one cloud onto the other.
   cover.max().array() += max_translation;
-  return covering_spec(cover, Eigen::Vector3i::Constant(2), voxel_size, limits);
+  const int shifts = 2 * voxels_along(max_translation, voxel_size, limits) + 2;
+  return covering_spec(cover, Eigen::Vector3i::Constant(shifts), voxel_size, limits);
 }
 
 }  // namespace
 
-SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach,
-                                   double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
-                                   const GridLimits& limits)
-    : SceneTranslation(scene, scene_spec(scene, start, reach, voxel_size, limits), std::nullopt, occupancy, params,
-                       limits) {}
+SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start,
+                                   double reach, double voxel_size, Occupancy occupancy,
+                                   const PhaseCorrelationParams& params, const GridLimits& limits)
+    : SceneTranslation(scene, scene_spec(scene, start, reach, voxel_size, limits), std::nullopt,
+                       occupancy, params, limits) {}
 
 SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
                                    double max_translation, double voxel_size, Occupancy occupancy,
                                    const PhaseCorrelationParams& params, const GridLimits& limits)
-    : SceneTranslation(scene, bounded_scene_spec(scene, model_box, max_translation, voxel_size, limits),
-                       Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits)), occupancy,
-                       params, limits) {}
+    : SceneTranslation(scene,
+                       bounded_scene_spec(scene, model_box, max_translation, voxel_size, limits),
+                       Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits)),
+                       occupancy, params, limits) {}
 
 SceneTranslation::SceneTranslation(const SceneMap& scene, const GridSpec& spec,
-                                   const std::optional<Eigen::Vector3i>& max_shift, Occupancy occupancy,
-                                   const PhaseCorrelationParams& params, const GridLimits& limits)
-    : occupancy_(occupancy), limits_(limits), spec_(spec), phase_(spec_, params), max_shift_(max_shift) {
+                                   const std::optional<Eigen::Vector3i>& max_shift,
+                                   Occupancy occupancy, const PhaseCorrelationParams& params,
+                                   const GridLimits& limits)
+    : occupancy_(occupancy),
+      limits_(limits),
+      spec_(spec),
+      phase_(spec_, params),
+      max_shift_(max_shift) {
   target_ = voxelize(scene.cloud(), spec_, occupancy, limits);
   target_energy_ = grid_energy(target_);
   phase_.set_target(target_);
@@ -332,7 +335,24 @@ Eigen::Vector3d common_direction(const Points& normals) {
 
 }  // namespace
 
-PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent) {
+namespace {
+
+// The points within 1.5 voxels of the plane whose normals are within 20 degrees of its.
+std::vector<char> on_plane(const PointCloud& scene, const SupportPlane& plane, double voxel_size) {
+  const double parallel = std::cos(20.0 * M_PI / 180.0);
+  std::vector<char> on(std::size_t(scene.size()), 0);
+  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
+    on[std::size_t(i)] =
+        std::abs(scene.normals().row(i).dot(plane.normal)) > parallel &&
+        std::abs(scene.points().row(i).dot(plane.normal) - plane.offset) < 1.5 * voxel_size;
+  }
+  return on;
+}
+
+}  // namespace
+
+std::optional<SupportPlane> support_plane(const PointCloud& scene, double voxel_size,
+                                          double min_extent) {
   const Points& p = scene.points();
   const Points& n = scene.normals();
   const Eigen::Vector3d axis = common_direction(n);
@@ -340,9 +360,10 @@ PointCloud without_support_plane(const PointCloud& scene, double voxel_size, dou
   // Votes for the plane's offset along the axis, in voxel bins.
   std::vector<std::pair<long, Eigen::Index>> offsets;
   for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    if (n.row(i).dot(axis) > parallel) offsets.emplace_back(std::lround(p.row(i).dot(axis) / voxel_size), i);
+    if (n.row(i).dot(axis) > parallel)
+      offsets.emplace_back(std::lround(p.row(i).dot(axis) / voxel_size), i);
   }
-  if (offsets.empty()) return scene;
+  if (offsets.empty()) return std::nullopt;
   std::sort(offsets.begin(), offsets.end());
   long best_bin = 0;
   std::size_t best_votes = 0;
@@ -351,34 +372,124 @@ PointCloud without_support_plane(const PointCloud& scene, double voxel_size, dou
     while (j < offsets.size() && offsets[j].first == offsets[i].first) ++j;
     // A bin and its neighbours: a plane's offsets straddle bin edges.
     std::size_t votes = j - i;
-    for (std::size_t k = j; k < offsets.size() && offsets[k].first == offsets[i].first + 1; ++k) ++votes;
+    for (std::size_t k = j; k < offsets.size() && offsets[k].first == offsets[i].first + 1; ++k)
+      ++votes;
     if (votes > best_votes) {
       best_votes = votes;
       best_bin = offsets[i].first;
     }
     i = j;
   }
-  const double offset = (double(best_bin) + 0.5) * voxel_size;
-  std::vector<char> on_plane(std::size_t(p.rows()), 0);
+  SupportPlane plane{axis, (double(best_bin) + 0.5) * voxel_size};
+  const std::vector<char> on = on_plane(scene, plane, voxel_size);
   Eigen::AlignedBox3d extent;
   std::size_t count = 0;
   for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    if (n.row(i).dot(axis) > parallel && std::abs(p.row(i).dot(axis) - offset) < 1.5 * voxel_size) {
-      on_plane[std::size_t(i)] = 1;
+    if (on[std::size_t(i)]) {
       extent.extend(p.row(i).transpose());
       ++count;
     }
   }
-  if (5 * count < std::size_t(p.rows()) || extent.sizes().norm() < min_extent) return scene;
-  Points kept_points(Eigen::Index(std::size_t(p.rows()) - count), 3), kept_normals(kept_points.rows(), 3);
-  Eigen::Index row = 0;
-  for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    if (on_plane[std::size_t(i)]) continue;
-    kept_points.row(row) = p.row(i);
-    kept_normals.row(row++) = n.row(i);
+  if (5 * count < std::size_t(p.rows()) || count == std::size_t(p.rows()) ||
+      extent.sizes().norm() < min_extent) {
+    return std::nullopt;
   }
-  if (kept_points.rows() == 0) return scene;
+  return plane;
+}
+
+PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent) {
+  const std::optional<SupportPlane> plane = support_plane(scene, voxel_size, min_extent);
+  if (!plane) return scene;
+  const std::vector<char> on = on_plane(scene, *plane, voxel_size);
+  const auto kept = Eigen::Index(std::count(on.begin(), on.end(), 0));
+  Points kept_points(kept, 3), kept_normals(kept, 3);
+  Eigen::Index row = 0;
+  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
+    if (on[std::size_t(i)]) continue;
+    kept_points.row(row) = scene.points().row(i);
+    kept_normals.row(row++) = scene.normals().row(i);
+  }
   return PointCloud(kept_points, kept_normals);
+}
+
+namespace {
+
+// Union-find over point indices, with path halving; the smaller index is the root, so
+// the parts do not depend on the order of the unions.
+struct DisjointSets {
+  std::vector<Eigen::Index> parent;
+  explicit DisjointSets(Eigen::Index n) : parent(std::size_t(n)) {
+    std::iota(parent.begin(), parent.end(), 0);
+  }
+  Eigen::Index find(Eigen::Index i) {
+    while (parent[std::size_t(i)] != i)
+      i = parent[std::size_t(i)] = parent[std::size_t(parent[std::size_t(i)])];
+    return i;
+  }
+  void unite(Eigen::Index a, Eigen::Index b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
+  }
+};
+
+std::uint64_t cell_key(const Eigen::Array3i& c) {
+  const Eigen::Array3i k = (c + (1 << 20)).max(0).min((1 << 21) - 1);
+  return (std::uint64_t(k.x()) << 42) | (std::uint64_t(k.y()) << 21) | std::uint64_t(k.z());
+}
+
+}  // namespace
+
+std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, double tolerance) {
+  // Cells of diagonal `tolerance`: the points of one cell are all connected, so sets
+  // join whole cells, and a pair of cells is searched for a close pair of points only
+  // until the first one is found.
+  const double edge = tolerance / std::sqrt(3.0);
+  std::unordered_map<std::uint64_t, Eigen::Index> cell_index;
+  std::vector<Eigen::Array3i> cells;
+  std::vector<std::vector<Eigen::Index>> members;
+  std::vector<Eigen::Index> cell_of_point(std::size_t(points.rows()));
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    const Eigen::Array3i c = (points.row(i).array() / edge).floor().cast<int>();
+    const auto [it, added] = cell_index.try_emplace(cell_key(c), Eigen::Index(cells.size()));
+    if (added) {
+      cells.push_back(c);
+      members.emplace_back();
+    }
+    members[std::size_t(it->second)].push_back(i);
+    cell_of_point[std::size_t(i)] = it->second;
+  }
+  const auto close = [&](Eigen::Index a, Eigen::Index b) {
+    for (const Eigen::Index i : members[std::size_t(a)])
+      for (const Eigen::Index j : members[std::size_t(b)])
+        if ((points.row(i) - points.row(j)).squaredNorm() <= tolerance * tolerance) return true;
+    return false;
+  };
+  DisjointSets sets(Eigen::Index(cells.size()));
+  for (Eigen::Index a = 0; a < Eigen::Index(cells.size()); ++a) {
+    for (int dx = -2; dx <= 2; ++dx)
+      for (int dy = -2; dy <= 2; ++dy)
+        for (int dz = -2; dz <= 2; ++dz) {
+          const auto it =
+              cell_index.find(cell_key(cells[std::size_t(a)] + Eigen::Array3i(dx, dy, dz)));
+          if (it == cell_index.end() || it->second <= a) continue;
+          if (sets.find(a) != sets.find(it->second) && close(a, it->second))
+            sets.unite(a, it->second);
+        }
+  }
+  std::vector<std::vector<Eigen::Index>> parts;
+  std::vector<Eigen::Index> part_of_root(cells.size(), -1);
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    Eigen::Index& part = part_of_root[std::size_t(sets.find(cell_of_point[std::size_t(i)]))];
+    if (part < 0) {
+      part = Eigen::Index(parts.size());
+      parts.emplace_back();
+    }
+    parts[std::size_t(part)].push_back(i);
+  }
+  std::stable_sort(parts.begin(), parts.end(),
+                   [](const auto& a, const auto& b) { return a.size() > b.size(); });
+  return parts;
 }
 
 }  // namespace spectral_vs::detail

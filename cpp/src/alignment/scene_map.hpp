@@ -17,10 +17,11 @@ namespace spectral_vs::detail {
 /// within one voxel of it (a mask over 26 directions), for the fitness of a pose; and
 /// the scene points near a place, for windows.
 class SceneMap {
-public:
+ public:
   /// `scene` is searched and windowed; `evidence` (the whole scene, or the same cloud)
   /// scores fitness. @throws std::invalid_argument if the map exceeds `limits`.
-  SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size, const GridLimits& limits);
+  SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
+           const GridLimits& limits);
 
   const PointCloud& cloud() const { return *scene_; }
 
@@ -28,14 +29,11 @@ public:
   /// point whose normal is within about 50 degrees of theirs, in [0, 1]. The normals
   /// keep a model lying flat on a table, or turned inside out, from scoring as a fit.
   double fitness(const Points& points, const Points& normals) const;
-  /// The same over the points facing `viewpoint` only (n . (viewpoint - p) > 0): what a
-  /// single view of the model from there would show.
-  double visible_fitness(const Points& points, const Points& normals, const Eigen::Vector3d& viewpoint) const;
 
   /// Indices of the scene points inside the axis-aligned box.
   std::vector<Eigen::Index> points_in(const Eigen::AlignedBox3d& box) const;
 
-private:
+ private:
   const PointCloud* scene_;
   GridSpec spec_;
   std::vector<std::uint32_t> near_;  // per voxel: directions of nearby scene normals
@@ -46,11 +44,11 @@ private:
 /// the shift is bounded by the margin, which keeps the small grid free of wrap-around.
 /// Re-placed (the scene re-voxelized and transformed) when the model leaves its centre.
 class TranslationWindow {
-public:
+ public:
   /// A window of half-width `reach + margin` metres, placed around `centre`.
-  TranslationWindow(const SceneMap& scene, double reach, double margin, const Eigen::Vector3d& centre,
-                    double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
-                    const GridLimits& limits);
+  TranslationWindow(const SceneMap& scene, double reach, double margin,
+                    const Eigen::Vector3d& centre, double voxel_size, Occupancy occupancy,
+                    const PhaseCorrelationParams& params, const GridLimits& limits);
 
   /// Centres the window on `centre`: re-voxelizes and transforms the scene inside it.
   void place(const Eigen::Vector3d& centre);
@@ -68,7 +66,7 @@ public:
   double half_width() const { return half_width_; }
   const Eigen::Vector3i& dims() const { return spec_.dims; }
 
-private:
+ private:
   const SceneMap* scene_;
   Occupancy occupancy_;
   GridLimits limits_;
@@ -86,25 +84,28 @@ private:
 /// room against wrap-around. At a coarse voxel it places the hypotheses of the global
 /// search; at the alignment's voxel it is the paper's translation step.
 class SceneTranslation {
-public:
-  SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach, double voxel_size,
-                   Occupancy occupancy, const PhaseCorrelationParams& params, const GridLimits& limits);
-
-  /// A bounded search: the grid holds the scene and the model's box where it starts,
-  /// both grown by `max_translation` metres per side, and only shifts up to that far
-  /// are sought. For two views of one scene (servoing) this grid is several times smaller
-  /// than one grown by the model's reach.
-  SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box, double max_translation,
+ public:
+  SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach,
                    double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
                    const GridLimits& limits);
+
+  /// A bounded search: the grid holds the scene and the model's box where it starts,
+  /// with `max_translation` metres of room past them (the grid is circular: room once
+  /// serves shifts either way), and only shifts up to that far are sought. For two views
+  /// of one scene (servoing) this grid is several times smaller than one grown by the
+  /// model's reach.
+  SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
+                   double max_translation, double voxel_size, Occupancy occupancy,
+                   const PhaseCorrelationParams& params, const GridLimits& limits);
 
   TranslationEstimate estimate(const Points& moved);
   double translation_cost() const;
   const GridSpec& spec() const { return spec_; }
 
-private:
-  SceneTranslation(const SceneMap& scene, const GridSpec& spec, const std::optional<Eigen::Vector3i>& max_shift,
-                   Occupancy occupancy, const PhaseCorrelationParams& params, const GridLimits& limits);
+ private:
+  SceneTranslation(const SceneMap& scene, const GridSpec& spec,
+                   const std::optional<Eigen::Vector3i>& max_shift, Occupancy occupancy,
+                   const PhaseCorrelationParams& params, const GridLimits& limits);
 
   Occupancy occupancy_;
   GridLimits limits_;
@@ -115,11 +116,26 @@ private:
   std::optional<Eigen::Vector3i> max_shift_;  // voxels; none: the whole grid
 };
 
+/// The scene's points grouped into connected parts: two points within `tolerance` metres
+/// are in one part (single linkage, on a hash grid of `tolerance` cells). Parts in
+/// decreasing size, each as rows of `points` in increasing order; deterministic.
+std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, double tolerance);
+
 /// The scene without its support plane: the largest plane of points with one normal
 /// direction, if it is wider than `min_extent` metres and holds more than a fifth of the
 /// points (a table under the objects); the scene itself otherwise. The plane is found by
 /// voting, deterministically: the most common normal direction, then the most common
 /// offset along it (bins of `voxel_size`).
 PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent);
+
+/// The plane `without_support_plane` removes: unit normal, the mean of its points' normals
+/// (which face the sensor, on the side of the objects it carries), and offset, n . x =
+/// offset on the plane, metres.
+struct SupportPlane {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double offset = 0.0;
+};
+std::optional<SupportPlane> support_plane(const PointCloud& scene, double voxel_size,
+                                          double min_extent);
 
 }  // namespace spectral_vs::detail

@@ -135,24 +135,30 @@ void check_pcd(const std::string& path) {
   }
   if (fields.empty()) bad("no FIELDS");
   if (counts.empty()) counts.assign(fields.size(), "1");
-  if (sizes.size() != fields.size() || types.size() != fields.size() || counts.size() != fields.size()) {
-    bad(fields.size(), " FIELDS but ", sizes.size(), " SIZE, ", types.size(), " TYPE and ", counts.size(),
-        " COUNT entries");
+  if (sizes.size() != fields.size() || types.size() != fields.size() ||
+      counts.size() != fields.size()) {
+    bad(fields.size(), " FIELDS but ", sizes.size(), " SIZE, ", types.size(), " TYPE and ",
+        counts.size(), " COUNT entries");
   }
   long long point_step = 0, values_per_point = 0;
   for (std::size_t i = 0; i < fields.size(); ++i) {
     const long long size = parse_count(sizes[i]);
     const long long count = parse_count(counts[i]);
     const std::string& type = types[i];
-    const bool valid_type = (type == "F" && (size == 4 || size == 8)) ||
-                            ((type == "I" || type == "U") && (size == 1 || size == 2 || size == 4 || size == 8));
-    if (!valid_type) bad("field ", in_quotes(fields[i]), " has TYPE ", in_quotes(type), " and SIZE ", in_quotes(sizes[i]));
-    if (count < 1 || count > 65536) bad("field ", in_quotes(fields[i]), " has COUNT ", in_quotes(counts[i]));
+    const bool valid_type =
+        (type == "F" && (size == 4 || size == 8)) ||
+        ((type == "I" || type == "U") && (size == 1 || size == 2 || size == 4 || size == 8));
+    if (!valid_type)
+      bad("field ", in_quotes(fields[i]), " has TYPE ", in_quotes(type), " and SIZE ",
+          in_quotes(sizes[i]));
+    if (count < 1 || count > 65536)
+      bad("field ", in_quotes(fields[i]), " has COUNT ", in_quotes(counts[i]));
     point_step += size * count;
     values_per_point += count;
   }
   if (width < 0 || points < 0) bad("no WIDTH or no POINTS");
-  if (width * height != points) bad("WIDTH x HEIGHT = ", width, " x ", height, " but POINTS = ", points);
+  if (width * height != points)
+    bad("WIDTH x HEIGHT = ", width, " x ", height, " but POINTS = ", points);
 
   // The data after the header line.
   const std::streamoff header_end = file.tellg();
@@ -161,8 +167,8 @@ void check_pcd(const std::string& path) {
   const long long available = file_size - header_end;
   if (data == "binary") {
     if (available < points * point_step) {
-      fail("path: ", path, " is truncated: ", available, " bytes of data for ", points, " points of ",
-           point_step, " bytes");
+      fail("path: ", path, " is truncated: ", available, " bytes of data for ", points,
+           " points of ", point_step, " bytes");
     }
   } else if (data == "binary_compressed") {
     if (points == 0) return;
@@ -176,8 +182,10 @@ void check_pcd(const std::string& path) {
           " bytes need ", points * point_step);
     }
     if (static_cast<long long>(block[0]) > available - 8 || block[0] == 0) {
-      fail("path: ", path, " is truncated: ", available - 8, " bytes of compressed data, the header of the "
-           "block says ", block[0]);
+      fail("path: ", path, " is truncated: ", available - 8,
+           " bytes of compressed data, the header of the "
+           "block says ",
+           block[0]);
     }
   } else if (data == "ascii") {
     file.clear();
@@ -193,7 +201,8 @@ void check_pcd(const std::string& path) {
         bad("point ", read, " has ", tokens.size(), " values, the header gives ", values_per_point);
       }
       for (const auto& token : tokens) {
-        if (!is_number(token)) bad("point ", read, " has a value ", in_quotes(token), " that is not a number");
+        if (!is_number(token))
+          bad("point ", read, " has a value ", in_quotes(token), " that is not a number");
       }
       ++read;
     }
@@ -238,17 +247,28 @@ double read_value(const std::uint8_t* at, std::uint8_t datatype) {
     return static_cast<double>(typed);
   };
   switch (datatype) {
-    case pcl::PCLPointField::FLOAT32: return read(float{});
-    case pcl::PCLPointField::FLOAT64: return read(double{});
-    case pcl::PCLPointField::INT8: return read(std::int8_t{});
-    case pcl::PCLPointField::UINT8: return read(std::uint8_t{});
-    case pcl::PCLPointField::INT16: return read(std::int16_t{});
-    case pcl::PCLPointField::UINT16: return read(std::uint16_t{});
-    case pcl::PCLPointField::INT32: return read(std::int32_t{});
-    case pcl::PCLPointField::UINT32: return read(std::uint32_t{});
-    case pcl::PCLPointField::INT64: return read(std::int64_t{});
-    case pcl::PCLPointField::UINT64: return read(std::uint64_t{});
-    default: fail("point field of unsupported data type ", int(datatype));
+    case pcl::PCLPointField::FLOAT32:
+      return read(float{});
+    case pcl::PCLPointField::FLOAT64:
+      return read(double{});
+    case pcl::PCLPointField::INT8:
+      return read(std::int8_t{});
+    case pcl::PCLPointField::UINT8:
+      return read(std::uint8_t{});
+    case pcl::PCLPointField::INT16:
+      return read(std::int16_t{});
+    case pcl::PCLPointField::UINT16:
+      return read(std::uint16_t{});
+    case pcl::PCLPointField::INT32:
+      return read(std::int32_t{});
+    case pcl::PCLPointField::UINT32:
+      return read(std::uint32_t{});
+    case pcl::PCLPointField::INT64:
+      return read(std::int64_t{});
+    case pcl::PCLPointField::UINT64:
+      return read(std::uint64_t{});
+    default:
+      fail("point field of unsupported data type ", int(datatype));
   }
 }
 
@@ -256,12 +276,16 @@ std::size_t field_size(std::uint8_t datatype) {
   switch (datatype) {
     case pcl::PCLPointField::FLOAT64:
     case pcl::PCLPointField::INT64:
-    case pcl::PCLPointField::UINT64: return 8;
+    case pcl::PCLPointField::UINT64:
+      return 8;
     case pcl::PCLPointField::INT16:
-    case pcl::PCLPointField::UINT16: return 2;
+    case pcl::PCLPointField::UINT16:
+      return 2;
     case pcl::PCLPointField::INT8:
-    case pcl::PCLPointField::UINT8: return 1;
-    default: return 4;
+    case pcl::PCLPointField::UINT8:
+      return 1;
+    default:
+      return 4;
   }
 }
 
@@ -318,9 +342,8 @@ PointCloud load_cloud(const std::string& path, CloudFileInfo* info) {
     fail("path: ", path, " has no x, y, z fields");
   }
   Points points = extract(cloud, xyz, path);
-  const pcl::PCLPointField* normal[3] = {find_field(cloud, "normal_x"),
-                                         find_field(cloud, "normal_y"),
-                                         find_field(cloud, "normal_z")};
+  const pcl::PCLPointField* normal[3] = {
+      find_field(cloud, "normal_x"), find_field(cloud, "normal_y"), find_field(cloud, "normal_z")};
   const bool had_normals = normal[0] && normal[1] && normal[2];
   Points normals = had_normals ? extract(cloud, normal, path) : Points();
 
@@ -367,8 +390,12 @@ void save_cloud(const std::string& path, const PointCloud& cloud, PcdEncoding en
     } else {
       pcl::PCDWriter writer;
       switch (encoding) {
-        case PcdEncoding::ascii: status = writer.writeASCII(path, message); break;
-        case PcdEncoding::binary: status = writer.writeBinary(path, message); break;
+        case PcdEncoding::ascii:
+          status = writer.writeASCII(path, message);
+          break;
+        case PcdEncoding::binary:
+          status = writer.writeBinary(path, message);
+          break;
         case PcdEncoding::binary_compressed:
           status = writer.writeBinaryCompressed(path, message);
           break;

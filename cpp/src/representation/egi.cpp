@@ -41,7 +41,8 @@ SphereGrid egi_histogram(const Points& normals, int bandwidth, const Eigen::Vect
   SphereGrid grid = SphereGrid::Zero(2 * bandwidth, 2 * bandwidth);
   for (Eigen::Index i = 0; i < normals.rows(); ++i) {
     const Eigen::Vector3d n = normals.row(i).transpose();
-    if (!n.allFinite() || n.norm() == 0.0) fail("normals: row ", i, " is not finite or has zero length");
+    if (!n.allFinite() || n.norm() == 0.0)
+      fail("normals: row ", i, " is not finite or has zero length");
     const double weight = weights ? (*weights)[i] : 1.0;
     if (!std::isfinite(weight)) fail("weights: entry ", i, " is not finite");
     const Eigen::Vector2i cell = egi_cell(n, bandwidth);

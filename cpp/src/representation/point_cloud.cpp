@@ -105,8 +105,8 @@ void require_rigid_transform(const Transform& T, const std::string& argument, do
   const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
   const double orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).norm();
   if (orthogonality > tolerance || R.determinant() < 0.0) {
-    fail(argument, " is not a rigid transform: |R^T R - I| = ", orthogonality,
-         " (limit ", tolerance, "), det R = ", R.determinant());
+    fail(argument, " is not a rigid transform: |R^T R - I| = ", orthogonality, " (limit ",
+         tolerance, "), det R = ", R.determinant());
   }
 }
 

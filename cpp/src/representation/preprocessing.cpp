@@ -3,7 +3,6 @@
 #include "common/checks.hpp"
 
 #include <pcl/features/normal_3d_omp.h>
-#include <pcl/filters/voxel_grid.h>
 #include <pcl/point_types.h>
 #include <pcl/search/kdtree.h>
 
@@ -30,7 +29,8 @@ Eigen::Vector3d float_offset(const PointCloud& cloud, double snap) {
   return snap > 0.0 ? Eigen::Vector3d((centroid / snap).array().round().matrix() * snap) : centroid;
 }
 
-pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud, const Eigen::Vector3d& offset) {
+pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud,
+                                              const Eigen::Vector3d& offset) {
   auto out = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
   out->resize(cloud.size());
   for (std::size_t i = 0; i < cloud.size(); ++i) {
@@ -46,56 +46,9 @@ pcl::PointCloud<pcl::PointNormal>::Ptr to_pcl(const PointCloud& cloud, const Eig
   return out;
 }
 
-// PCL's leaf size is a float.
-constexpr double kMaxVoxelSize = 1e6;
-
-// PCL's VoxelGrid silently returns its input when the voxel indices would overflow
-// a 32-bit integer; refuse such a call instead of returning a wrong answer.
-void check_voxel_count(const PointCloud& cloud, double voxel_size) {
-  const Eigen::Vector3d extent = cloud.points().colwise().maxCoeff() -
-                                 cloud.points().colwise().minCoeff();
-  double voxels = 1.0;
-  for (int axis = 0; axis < 3; ++axis) voxels *= std::floor(extent[axis] / voxel_size) + 1.0;
-  const double limit = static_cast<double>(std::numeric_limits<std::int32_t>::max());
-  if (voxels > limit) {
-    fail("voxel_size: ", voxel_size, " m is too small for a cloud of extent ", extent.transpose(),
-         " m: ", voxels, " voxels exceed the limit of ", limit);
-  }
-}
-
 }  // namespace
 
-PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size) {
-  require_non_empty(cloud, "cloud");
-  detail::require_positive_finite(voxel_size, "voxel_size");
-  if (voxel_size > kMaxVoxelSize) fail("voxel_size must be <= ", kMaxVoxelSize, " m, got ", voxel_size);
-  check_voxel_count(cloud, voxel_size);
-
-  const Eigen::Vector3d offset = float_offset(cloud, voxel_size);
-  pcl::VoxelGrid<pcl::PointNormal> filter;
-  filter.setInputCloud(to_pcl(cloud, offset));
-  const auto leaf = static_cast<float>(voxel_size);
-  filter.setLeafSize(leaf, leaf, leaf);
-  filter.setDownsampleAllData(true);
-  pcl::PointCloud<pcl::PointNormal> reduced;
-  filter.filter(reduced);
-
-  Points points(static_cast<Eigen::Index>(reduced.size()), 3);
-  Points normals(cloud.has_normals() ? points.rows() : 0, 3);
-  Eigen::Index kept = 0;
-  for (const auto& p : reduced) {
-    if (cloud.has_normals()) {
-      const Eigen::Vector3d n = p.getNormalVector3fMap().cast<double>();
-      if (!(n.norm() > 1e-6)) continue;  // opposite normals cancelled: no direction left
-      normals.row(kept) = n.normalized().transpose();
-    }
-    points.row(kept) = (p.getVector3fMap().cast<double>() + offset).transpose();
-    ++kept;
-  }
-  points.conservativeResize(kept, Eigen::NoChange);
-  if (cloud.has_normals()) normals.conservativeResize(kept, Eigen::NoChange);
-  return PointCloud(std::move(points), std::move(normals));
-}
+// voxel_downsample is in voxel_downsample.cpp.
 
 PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParams& params) {
   require_non_empty(cloud, "cloud");
@@ -103,7 +56,8 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
   if (params.k_neighbors == 0) detail::require_positive_finite(params.radius, "radius");
   if (!params.viewpoint.allFinite()) fail("viewpoint must be finite");
   // PCL's OpenMP would try to start them all (100000 threads crashed the process).
-  if (params.threads < 1 || params.threads > 256) fail("threads must be in [1, 256], got ", params.threads);
+  if (params.threads < 1 || params.threads > 256)
+    fail("threads must be in [1, 256], got ", params.threads);
 
   const Eigen::Vector3d centroid = cloud.centroid();
   auto input = to_pcl(cloud, float_offset(cloud, 0.0));
@@ -135,8 +89,10 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
     ++kept;
   }
   if (kept == 0) {
-    fail("radius/k_neighbors: no point has enough neighbours for a normal (3 or more, not all "
-         "coincident or collinear); radius = ", params.radius, " m, k_neighbors = ", params.k_neighbors);
+    fail(
+        "radius/k_neighbors: no point has enough neighbours for a normal (3 or more, not all "
+        "coincident or collinear); radius = ",
+        params.radius, " m, k_neighbors = ", params.k_neighbors);
   }
   points.conservativeResize(kept, Eigen::NoChange);
   normals.conservativeResize(kept, Eigen::NoChange);

@@ -10,7 +10,8 @@ namespace spectral_vs {
 using detail::fail;
 
 std::size_t GridSpec::voxel_count() const {
-  return static_cast<std::size_t>(std::max(dims.x(), 0)) * static_cast<std::size_t>(std::max(dims.y(), 0)) *
+  return static_cast<std::size_t>(std::max(dims.x(), 0)) *
+         static_cast<std::size_t>(std::max(dims.y(), 0)) *
          static_cast<std::size_t>(std::max(dims.z(), 0));
 }
 
@@ -35,7 +36,7 @@ namespace {
 // Transform lengths on which FFTW's estimated plans are fast, measured here as the time
 // of a forward + inverse real 3D transform per voxel (benchmarks/fft_sizes.cpp): 5-12 ns
 // for these, 15-30 ns for other smooth lengths such as 24, 30, 40, 54, 60, 90, 96 and 120.
-constexpr int kFastLengths[] = {2,  4,  6,  8,   10,  12,  16,  20,  32,  36,  48,  64,  72,
+constexpr int kFastLengths[] = {2,  4,   6,   8,   10,  12,  16,  20,  32,  36,  48,  64,  72,
                                 80, 100, 128, 160, 200, 256, 320, 400, 512, 640, 800, 1024};
 
 }  // namespace
@@ -84,7 +85,8 @@ GridSpec make_grid_spec(const Eigen::AlignedBox3d& box_a, const Eigen::AlignedBo
   spec.resolution = resolution;
   // One empty voxel of margin on each side; snapped so grids of other clouds align.
   spec.origin = ((both.min() / resolution).array().floor() - 1.0).matrix() * resolution;
-  const Eigen::Vector3d top = ((both.max() / resolution).array().floor() + 2.0).matrix() * resolution;
+  const Eigen::Vector3d top =
+      ((both.max() / resolution).array().floor() + 2.0).matrix() * resolution;
   for (int axis = 0; axis < 3; ++axis) {
     const double union_voxels = std::round((top[axis] - spec.origin[axis]) / resolution);
     const double a_voxels = std::floor(box_a.sizes()[axis] / resolution) + 1.0;
@@ -113,13 +115,14 @@ float& occupied_cell(VoxelGrid& grid, const Eigen::Vector3i& index) {
   const auto& dims = grid.spec.dims;
   grid.occupied_min = grid.occupied_min.cwiseMin(index);
   grid.occupied_max = grid.occupied_max.cwiseMax(index);
-  return grid.values[(static_cast<std::size_t>(index.x()) * dims.y() + index.y()) * dims.z() +
-                     index.z()];
+  return grid
+      .values[(static_cast<std::size_t>(index.x()) * dims.y() + index.y()) * dims.z() + index.z()];
 }
 
 void splat_trilinear(VoxelGrid& grid, const Eigen::Vector3d& p) {
   // Weights relative to the 8 voxel centres around p (centre of voxel i: origin + (i + 0.5) r).
-  const Eigen::Vector3d u = (p - grid.spec.origin) / grid.spec.resolution - Eigen::Vector3d::Constant(0.5);
+  const Eigen::Vector3d u =
+      (p - grid.spec.origin) / grid.spec.resolution - Eigen::Vector3d::Constant(0.5);
   const Eigen::Vector3d lower = u.array().floor();
   const Eigen::Vector3d f = u - lower;
   const Eigen::Vector3i base = lower.cast<int>();
@@ -131,10 +134,12 @@ void splat_trilinear(VoxelGrid& grid, const Eigen::Vector3d& p) {
     grid.occupied_max = grid.occupied_max.cwiseMax(base + (f.array() > 0.0).cast<int>().matrix());
     const std::size_t sy = dims.z(), sx = std::size_t(dims.y()) * dims.z();
     float* cell = grid.values.data() + base.x() * sx + base.y() * sy + base.z();
-    const double wx[2] = {1.0 - f.x(), f.x()}, wy[2] = {1.0 - f.y(), f.y()}, wz[2] = {1.0 - f.z(), f.z()};
+    const double wx[2] = {1.0 - f.x(), f.x()}, wy[2] = {1.0 - f.y(), f.y()},
+                 wz[2] = {1.0 - f.z(), f.z()};
     for (int i = 0; i < 2; ++i)
       for (int j = 0; j < 2; ++j)
-        for (int k = 0; k < 2; ++k) cell[i * sx + j * sy + k] += static_cast<float>(wx[i] * wy[j] * wz[k]);
+        for (int k = 0; k < 2; ++k)
+          cell[i * sx + j * sy + k] += static_cast<float>(wx[i] * wy[j] * wz[k]);
     return;
   }
   for (int corner = 0; corner < 8; ++corner) {
@@ -171,8 +176,8 @@ void reset(VoxelGrid& grid, const GridSpec& spec) {
 
 }  // namespace
 
-void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy,
-                   VoxelGrid& grid, const GridLimits& limits) {
+void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy, VoxelGrid& grid,
+                   const GridLimits& limits) {
   check_spec(spec, limits);
   reset(grid, spec);
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
@@ -183,9 +188,15 @@ void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupan
       continue;
     }
     switch (occupancy) {
-      case Occupancy::binary: occupied_cell(grid, index) = 1.0f; break;
-      case Occupancy::count: occupied_cell(grid, index) += 1.0f; break;
-      case Occupancy::trilinear: splat_trilinear(grid, p); break;
+      case Occupancy::binary:
+        occupied_cell(grid, index) = 1.0f;
+        break;
+      case Occupancy::count:
+        occupied_cell(grid, index) += 1.0f;
+        break;
+      case Occupancy::trilinear:
+        splat_trilinear(grid, p);
+        break;
     }
   }
 }

@@ -102,7 +102,7 @@ struct PhaseCorrelation::Impl {
   PhaseCorrelationParams params;
   std::size_t real_count = 0;
   std::size_t complex_count = 0;
-  int half_z = 0;  // nz / 2 + 1
+  int half_z = 0;            // nz / 2 + 1
   FftwBuffer<float> input;   // forward transform's input; zero outside input_box
   FftwBuffer<float> output;  // inverse transform's output: the correlation
   // The moving grid's spectrum, overwritten in place by the cross-power spectrum (one
@@ -149,14 +149,16 @@ struct PhaseCorrelation::Impl {
     auto* part = reinterpret_cast<fftwf_complex*>(partial.get());
     fftwf_plan_with_nthreads(1);
     const fftwf_iodim along_z{nz, 1, 1}, rows{ny, nz, half_z};
-    z_slab = fftwf_plan_guru_dft_r2c(1, &along_z, 1, &rows, input.get(), part, FFTW_ESTIMATE | FFTW_UNALIGNED);
+    z_slab = fftwf_plan_guru_dft_r2c(1, &along_z, 1, &rows, input.get(), part,
+                                     FFTW_ESTIMATE | FFTW_UNALIGNED);
     const fftwf_iodim along_y{ny, half_z, half_z}, columns{half_z, 1, 1};
     y_slab = fftwf_plan_guru_dft(1, &along_y, 1, &columns, part, part, FFTW_FORWARD,
                                  FFTW_ESTIMATE | FFTW_UNALIGNED);
     fftwf_plan_with_nthreads(params.threads);
     const fftwf_iodim along_x{nx, ny * half_z, ny * half_z}, lines{ny * half_z, 1, 1};
-    x_all = fftwf_plan_guru_dft(1, &along_x, 1, &lines, part, reinterpret_cast<fftwf_complex*>(spectrum.get()),
-                                FFTW_FORWARD, FFTW_ESTIMATE);
+    x_all = fftwf_plan_guru_dft(1, &along_x, 1, &lines, part,
+                                reinterpret_cast<fftwf_complex*>(spectrum.get()), FFTW_FORWARD,
+                                FFTW_ESTIMATE);
     inverse = fftwf_plan_dft_c2r_3d(nx, ny, nz, reinterpret_cast<fftwf_complex*>(spectrum.get()),
                                     output.get(), FFTW_ESTIMATE);
     if (!z_slab || !y_slab || !x_all || !inverse) {
@@ -170,14 +172,16 @@ struct PhaseCorrelation::Impl {
     if ((lo.array() > hi.array()).any()) return;
     const std::size_t ny = spec.dims.y(), nz = spec.dims.z();
     for (int i = lo.x(); i <= hi.x(); ++i)
-      for (int j = lo.y(); j <= hi.y(); ++j) f((i * ny + j) * nz + lo.z(), std::size_t(hi.z() - lo.z() + 1));
+      for (int j = lo.y(); j <= hi.y(); ++j)
+        f((i * ny + j) * nz + lo.z(), std::size_t(hi.z() - lo.z() + 1));
   }
 
   // Copies the occupied box of `grid` into `input` after clearing the previous box:
   // a VoxelGrid is zero outside its occupied box.
   void load_input(const VoxelGrid& grid) {
     float* in = input.get();
-    for_each_row(input_min, input_max, [&](std::size_t at, std::size_t n) { std::fill_n(in + at, n, 0.0f); });
+    for_each_row(input_min, input_max,
+                 [&](std::size_t at, std::size_t n) { std::fill_n(in + at, n, 0.0f); });
     const float* values = grid.values.data();
     for_each_row(grid.occupied_min, grid.occupied_max,
                  [&](std::size_t at, std::size_t n) { std::copy_n(values + at, n, in + at); });
@@ -191,7 +195,8 @@ struct PhaseCorrelation::Impl {
     const std::size_t slab_out = std::size_t(spec.dims.y()) * half_z;
     const int x0 = grid.occupied_min.x(), x1 = grid.occupied_max.x();
     for (int x = partial_x0; x <= partial_x1; ++x) {
-      if (x < x0 || x > x1) std::fill_n(partial.get() + x * slab_out, slab_out, Complex(0.0f, 0.0f));
+      if (x < x0 || x > x1)
+        std::fill_n(partial.get() + x * slab_out, slab_out, Complex(0.0f, 0.0f));
     }
     for (int x = x0; x <= x1; ++x) {
       auto* slab = reinterpret_cast<fftwf_complex*>(partial.get() + x * slab_out);
@@ -200,7 +205,8 @@ struct PhaseCorrelation::Impl {
     }
     partial_x0 = x0;
     partial_x1 = x1;
-    fftwf_execute_dft(x_all, reinterpret_cast<fftwf_complex*>(partial.get()), reinterpret_cast<fftwf_complex*>(out));
+    fftwf_execute_dft(x_all, reinterpret_cast<fftwf_complex*>(partial.get()),
+                      reinterpret_cast<fftwf_complex*>(out));
   }
 
   // Normalised cross-power spectrum of eq. (7), oriented so that its inverse peaks at
@@ -242,12 +248,13 @@ struct PhaseCorrelation::Impl {
   // The largest correlation over feasible shifts. Along z the feasible indices form at
   // most two runs; each run's maximum is a vectorised reduction, and the index is
   // searched only in a run that beats the best so far.
-  Eigen::Vector3i find_peak(const VoxelGrid& moving, const Eigen::Vector3i& max_shift, float& height) const {
+  Eigen::Vector3i find_peak(const VoxelGrid& moving, const Eigen::Vector3i& max_shift,
+                            float& height) const {
     std::vector<int> shifts[3];
     for (int axis = 0; axis < 3; ++axis) {
-      shifts[axis] = unfolded_shifts(spec.dims[axis],
-                                     std::max(target_min[axis] - moving.occupied_max[axis], -max_shift[axis]),
-                                     std::min(target_max[axis] - moving.occupied_min[axis], max_shift[axis]));
+      shifts[axis] = unfolded_shifts(
+          spec.dims[axis], std::max(target_min[axis] - moving.occupied_max[axis], -max_shift[axis]),
+          std::min(target_max[axis] - moving.occupied_min[axis], max_shift[axis]));
     }
     const std::vector<std::pair<int, int>> runs = feasible_runs(shifts[2]);
     const int ny = spec.dims.y(), nz = spec.dims.z();
@@ -259,7 +266,8 @@ struct PhaseCorrelation::Impl {
         if (shifts[1][j] == INT_MIN) continue;
         const float* row = output.get() + (static_cast<std::size_t>(i) * ny + j) * nz;
         for (const auto& [begin, end] : runs) {
-          const float run_max = Eigen::Map<const Eigen::ArrayXf>(row + begin, end - begin).maxCoeff();
+          const float run_max =
+              Eigen::Map<const Eigen::ArrayXf>(row + begin, end - begin).maxCoeff();
           if (!(run_max > height)) continue;
           const int k = static_cast<int>(std::find(row + begin, row + end, run_max) - row);
           height = run_max;
@@ -369,12 +377,14 @@ struct PhaseCorrelation::Impl {
       float rx = 0.0f, ry = 0.0f, rz = 0.0f;
 #pragma omp simd reduction(+ : rx, ry, rz)
       for (std::size_t b = 0; b < n; ++b) {
-        const float residual = weights[b] * wrap_angle(angles[b] + kTwoPi * (fx[b] * dx + fy[b] * dy + fz[b] * dz));
+        const float residual =
+            weights[b] * wrap_angle(angles[b] + kTwoPi * (fx[b] * dx + fy[b] * dy + fz[b] * dz));
         rx += residual * fx[b];
         ry += residual * fy[b];
         rz += residual * fz[b];
       }
-      const Eigen::Vector3d step = low_normal.ldlt().solve(Eigen::Vector3d(rx, ry, rz)) / (-2.0 * M_PI);
+      const Eigen::Vector3d step =
+          low_normal.ldlt().solve(Eigen::Vector3d(rx, ry, rz)) / (-2.0 * M_PI);
       if (!step.allFinite()) return Eigen::Vector3d::Zero();
       d += step;
     }
@@ -393,12 +403,14 @@ PhaseCorrelation::PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationP
   if (!(params.subvoxel_band > 0.0 && params.subvoxel_band <= 0.5)) {
     fail("subvoxel_band must be in (0, 0.5] cycles per voxel, got ", params.subvoxel_band);
   }
-  if (params.threads < 1 || params.threads > 256) fail("threads must be in [1, 256], got ", params.threads);
+  if (params.threads < 1 || params.threads > 256)
+    fail("threads must be in [1, 256], got ", params.threads);
   const double voxels = double(spec.dims.x()) * double(spec.dims.y()) * double(spec.dims.z());
   if (voxels > double(params.limits.max_voxels)) {
-    fail("spec: a phase correlation grid of ", spec.dims.x(), " x ", spec.dims.y(), " x ", spec.dims.z(),
-         " voxels (about ", voxels * kPhaseCorrelationBytesPerVoxel / 1e9, " GB) exceeds the limit of ",
-         params.limits.max_voxels, " voxels (GridLimits::max_voxels)");
+    fail("spec: a phase correlation grid of ", spec.dims.x(), " x ", spec.dims.y(), " x ",
+         spec.dims.z(), " voxels (about ", voxels * kPhaseCorrelationBytesPerVoxel / 1e9,
+         " GB) exceeds the limit of ", params.limits.max_voxels,
+         " voxels (GridLimits::max_voxels)");
   }
   impl_->spec = spec;
   impl_->params = params;
@@ -438,9 +450,11 @@ TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving) {
   return estimate(moving, Eigen::Vector3i::Constant(INT_MAX / 2));
 }
 
-TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving, const Eigen::Vector3i& max_shift) {
+TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving,
+                                               const Eigen::Vector3i& max_shift) {
   if (!impl_->has_target) fail("PhaseCorrelation: set_target() must be called before estimate()");
-  if ((max_shift.array() < 0).any()) fail("max_shift must be >= 0 voxels, got ", max_shift.transpose());
+  if ((max_shift.array() < 0).any())
+    fail("max_shift must be >= 0 voxels, got ", max_shift.transpose());
   require_same_spec(impl_->spec, moving, "moving");
   Impl& im = *impl_;
   im.transform(moving, im.spectrum.get());

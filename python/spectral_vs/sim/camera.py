@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet
 
-from spectral_vs._core import PointCloud
+from spectral_vs._core import PointCloud, organized_cloud
 
 #: Flip between the vision camera frame and PyBullet's OpenGL camera frame.
 OPENGL_FROM_VISION = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -180,7 +180,10 @@ class CameraParams:
     noise : DepthNoise
         Depth noise and missing pixels (none by default).
     normals : NormalParams
-        How normals are computed from the organized depth image.
+        How normals are computed from the organized depth image, and the pixel stride.
+        Every pixel by default: a stride of 2 quarters the points to convert and
+        downsample (1.5 ms less per servo step) but left the servo's final rotation error
+        at a median of 0.53 instead of 0.2 degrees (docs/servoing.md).
     """
 
     intrinsics: CameraIntrinsics = field(default_factory=CameraIntrinsics)
@@ -309,12 +312,15 @@ def _box_sum(image: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def organized_normals(points: np.ndarray, params: NormalParams = NormalParams()) -> np.ndarray:
+def organized_normals(
+    points: np.ndarray, params: NormalParams = NormalParams(), dtype: type[np.floating] = np.float32
+) -> np.ndarray:
     """Unit normals (H, W, 3) of organized points, oriented toward the camera origin;
     NaN where no reliable normal exists (see :class:`NormalParams`).
 
-    Computed per coordinate plane in float32 (4x faster than interleaved float64; the
-    normals differ by about 1e-5 rad).
+    The NumPy reference of the core's ``organized_cloud`` (which :func:`depth_to_cloud`
+    uses). Computed per coordinate plane, in float32 by default (4x faster than
+    interleaved float64; the normals differ by about 1e-5 rad).
 
     Parameters
     ----------
@@ -322,6 +328,8 @@ def organized_normals(points: np.ndarray, params: NormalParams = NormalParams())
         Organized points in the camera frame (:func:`back_project`), metres.
     params : NormalParams
         Stencil, averaging window and depth-jump threshold.
+    dtype : type
+        Floating type of the computation (``np.float32`` or ``np.float64``).
 
     Returns
     -------
@@ -334,7 +342,7 @@ def organized_normals(points: np.ndarray, params: NormalParams = NormalParams())
     normals = np.full((h, w, 3), np.nan)
     if h <= 2 * s or w <= 2 * s:
         return normals
-    x, y, z = (np.asarray(points[..., i], dtype=np.float32) for i in range(3))
+    x, y, z = (np.asarray(points[..., i], dtype=np.dtype(dtype)) for i in range(3))
     # The pixel and its four stencil neighbours, on the interior where all exist.
     center = (slice(s, -s), slice(s, -s))
     right, left = (slice(s, -s), slice(2 * s, None)), (slice(s, -s), slice(None, -2 * s))
@@ -369,6 +377,9 @@ def depth_to_cloud(
     """The point cloud with normals of a planar depth image (metres, NaN = missing), in
     the camera frame; pixels without a point or a reliable normal are dropped.
 
+    Computed in the core (``organized_cloud``, double precision), the same as
+    :func:`back_project` and :func:`organized_normals` in float64 followed by the stride.
+
     Parameters
     ----------
     depth : ndarray, shape (height, width)
@@ -392,9 +403,14 @@ def depth_to_cloud(
     expected = (intrinsics.height, intrinsics.width)
     if depth.shape != expected:
         raise ValueError(f"depth must have shape {expected} (height, width), got {depth.shape}")
-    points = back_project(depth, intrinsics)
-    normals = organized_normals(points, params)
-    points = points[:: params.stride, :: params.stride].reshape(-1, 3)
-    normals = normals[:: params.stride, :: params.stride].reshape(-1, 3)
-    keep = np.isfinite(normals[:, 0])
-    return PointCloud(np.ascontiguousarray(points[keep]), np.ascontiguousarray(normals[keep]))
+    return organized_cloud(
+        depth,
+        intrinsics.fx,
+        intrinsics.fy,
+        intrinsics.cx,
+        intrinsics.cy,
+        normal_step=params.normal_step,
+        window=params.window,
+        max_depth_jump=params.max_depth_jump,
+        stride=params.stride,
+    )

@@ -23,64 +23,71 @@ enum class RotationStep {
 
 /// Settings of `align`. Defaults are the ones measured best here (docs/experiments.md).
 struct AlignParams {
-  double voxel_size = 0.008;   ///< Voxel edge r of the translation grid, metres.
-  int bandwidth = 16;          ///< B: EGI harmonics of degree l < B are correlated.
+  double voxel_size = 0.008;      ///< Voxel edge r of the translation grid, metres.
+  int bandwidth = 16;             ///< B: EGI harmonics of degree l < B are correlated.
   double translation_gain = 0.5;  ///< lambda_t in (0, 1]: share of the phase-correlation
                                   ///< shift applied per iteration (eq. 16).
-  double rotation_gain = 0.5;  ///< lambda_r > 0. Newton: share of the Newton step, in (0, 1].
-                               ///< Gradient: radians per unit of normalised gradient.
+  double rotation_gain = 0.5;     ///< lambda_r > 0. Newton: share of the Newton step, in (0, 1].
+                                  ///< Gradient: radians per unit of normalised gradient.
   RotationStep rotation_step = RotationStep::newton;
   double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
-  double tolerance = 0.02;     ///< eps_g of eq. (17): stop when |translation step| in voxels
-                               ///< plus |grad C| (normalised correlation per radian) < eps_g.
-  int max_iterations = 100;    ///< Iterations of Algorithm 1 per run, >= 1.
+  double tolerance = 0.02;          ///< eps_g of eq. (17): stop when |translation step| in voxels
+                                    ///< plus |grad C| (normalised correlation per radian) < eps_g.
+  int max_iterations = 100;         ///< Iterations of Algorithm 1 per run, >= 1.
   /// Time budget of the whole alignment, seconds, >= 0 (0: none). Checked after every
   /// iteration, hypothesis and refinement: past it, the best pose so far is returned with
   /// converged = false and stop_reason = max_seconds (the one setting whose result depends
   /// on the machine's speed).
   double max_seconds = 0.0;
   Transform initial_guess = Transform::Identity();  ///< T_scene_model to start from.
-  bool global_search = true;   ///< Start from the best rotations of the SO(3) search
-                               ///< (beyond the paper) instead of the initial guess's.
-  int hypotheses = 32;         ///< Rotations of the global search that are refined and verified:
-                               ///< enough to hold the true one among the near-equal maxima of
-                               ///< an object with symmetric faces.
-  int refinements = 3;         ///< The best-verified hypotheses that Algorithm 1 then runs from,
-                               ///< each in a window of the scene around it; the one with the
-                               ///< best final fitness is kept. In [1, hypotheses].
+  bool global_search = true;  ///< Start from the best rotations of the SO(3) search
+                              ///< (beyond the paper) instead of the initial guess's.
+  int hypotheses = 32;        ///< Rotations of the global search that are refined and verified:
+                              ///< enough to hold the true one among the near-equal maxima of
+                              ///< an object with symmetric faces. Searched per part of a
+                              ///< cluttered scene (see suppress_support_plane): half as many
+                              ///< per part, at least 1.
+  int refinements = 3;        ///< The best-verified hypotheses that Algorithm 1 then runs from,
+                              ///< each in a window of the scene around it; the one with the
+                              ///< best final fitness is kept. In [1, hypotheses].
   double search_voxel_size = 0.0;  ///< Voxel of the global search's translation grid, metres.
                                    ///< 0: twice voxel_size, coarser where needed to keep that
                                    ///< grid under 2^19 voxels (large scenes).
-  double window_margin = 0.0;  ///< How far the model may move per window placement, metres:
-                               ///< local windows are the model's reach plus this on each side.
-                               ///< 0: the larger of 5 voxels and 2.5 search voxels.
-  double max_translation = 0.0;  ///< Without global search: the largest translation from the
-                                 ///< initial guess that is sought, metres, per axis. The grid
-                                 ///< then holds the scene and the model's start grown by this
-                                 ///< (not by the model's reach), all iterations run on it, and
-                                 ///< farther phase-correlation peaks are ignored: for two views
-                                 ///< of one scene, as in servoing. 0: unbounded (the paper).
+  double window_margin = 0.0;      ///< How far the model may move per window placement, metres:
+                                   ///< local windows are the model's reach plus this on each side.
+                                   ///< 0: the larger of 5 voxels and 2.5 search voxels.
+  double max_translation = 0.0;    ///< Without global search: the largest translation from the
+                                   ///< initial guess that is sought, metres, per axis. The grid
+                                   ///< then holds the scene and the model's start grown by this
+                                   ///< (not by the model's reach), all iterations run on it, and
+                                   ///< farther phase-correlation peaks are ignored: for two views
+                                   ///< of one scene, as in servoing. 0: unbounded (the paper).
   /// The sensor origin of a single-view scene, scene coordinates, metres: fitness then
-  /// scores only the model's points facing it (what the view can show), which tells a
-  /// pose from its flip. Unset for a scene seen from all sides.
+  /// checks a pose against what the view saw (AlignResult::fitness), which tells a pose
+  /// from its flip. Unset for a scene seen from all sides.
   std::optional<Eigen::Vector3d> scene_viewpoint;
-  bool suppress_support_plane = true;  ///< With global search: search the scene without its
-                                       ///< support plane (a plane of one normal direction
-                                       ///< wider than 4 model reaches holding over a fifth
-                                       ///< of the points, e.g. a table); fitness still sees it.
-  bool polish = true;          ///< With global search: after Algorithm 1, a pattern search on
-                               ///< the rotation (4 to 1/4 degree steps) for the best overlap
-                               ///< of the model's voxels with the scene's, past the EGI's
-                               ///< accuracy floor. Skipped for models sampled sparser than
-                               ///< 2 points per occupied voxel. For a model whose EGI has a
-                               ///< flat axis (its smallest autocorrelation curvature under a
-                               ///< tenth of the largest: a mug's axis, its handle a few
-                               ///< percent of the normals), turns about that axis every 15
-                               ///< degrees are scored by the same overlap first.
-  bool subvoxel = true;        ///< Sub-voxel refinement of the phase-correlation peak.
-  Occupancy occupancy = Occupancy::trilinear;  ///< Voxel values (the paper: binary).
+  /// With global search: search the scene without its support plane (a plane of one
+  /// normal direction wider than 4 model reaches holding over a fifth of the points, e.g.
+  /// a table; fitness still sees it). Where there is one, the objects on it are searched
+  /// one by one: the points more than 1.5 voxels above the plane are split into connected
+  /// parts (points within 0.75 voxel_size joined), and each part that could be the object
+  /// or a view of it (at least 30 points, its box diagonal between a quarter of the
+  /// model's reach and 4 reaches; the 8 largest) gets its own SO(3) search on its own EGI,
+  /// its rotations placed by phase correlation in a window around it.
+  bool suppress_support_plane = true;
+  bool polish = true;    ///< With global search: after Algorithm 1, a pattern search on
+                         ///< the rotation (4 to 1/4 degree steps) for the best overlap
+                         ///< of the model's voxels with the scene's, past the EGI's
+                         ///< accuracy floor. Skipped for models sampled sparser than
+                         ///< 2 points per occupied voxel. For a model whose EGI has a
+                         ///< flat axis (its smallest autocorrelation curvature under a
+                         ///< tenth of the largest: a mug's axis, its handle a few
+                         ///< percent of the normals), turns about that axis every 15
+                         ///< degrees are scored by the same overlap first.
+  bool subvoxel = true;  ///< Sub-voxel refinement of the phase-correlation peak.
+  Occupancy occupancy = Occupancy::trilinear;    ///< Voxel values (the paper: binary).
   EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
-  int threads = 1;             ///< Threads for FFTW and the SO(3) search, in [1, 256].
+  int threads = 1;  ///< Threads for FFTW and the SO(3) search, in [1, 256].
   /// Memory cap: any grid over limits.max_voxels voxels (scene map, translation grids,
   /// windows) is refused with std::invalid_argument before it is allocated. The largest
   /// grids cost about 28 bytes per voxel (values, FFT buffers), so the default 2^27 voxels
@@ -110,14 +117,19 @@ struct AlignIteration {
 /// Outcome of `align`.
 struct AlignResult {
   Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
-  bool converged = false;      ///< The stop rule (eq. 17) held before max_iterations
-                               ///< (and, with global search, all runs finished in time).
+  bool converged = false;  ///< The stop rule (eq. 17) held before max_iterations
+                           ///< (and, with global search, all runs finished in time).
   AlignStopReason stop_reason = AlignStopReason::max_iterations;  ///< Why it stopped.
-  int iterations = 0;          ///< Iterations of Algorithm 1 in the kept run.
-  /// Fraction of the model's occupied voxels that lie within one voxel of scene points
-  /// with a normal within about 50 degrees of the model's, at the final pose, in [0, 1]:
-  /// high for a correct alignment, low for a wrong one. A single-view scan of an object
-  /// shows about half of a full model.
+  int iterations = 0;  ///< Iterations of Algorithm 1 in the kept run.
+  /// How well the scene supports the final pose, in [0, 1]: high for a correct alignment,
+  /// low for a wrong one. Without scene_viewpoint: the fraction of the model's occupied
+  /// voxels that lie within one voxel of scene points with a normal within about 50
+  /// degrees of the model's. With it: the model is rendered from the viewpoint (its
+  /// nearest points facing it, in pixels of half a voxel) and each pixel compared with the
+  /// scan's depth there: confirmed (within one voxel, normals within 45 degrees),
+  /// contradicted (the scan saw through it, or a surface turned another way) or hidden
+  /// (the scan saw something nearer); fitness = confirmed / (confirmed + contradicted +
+  /// hidden / 2).
   double fitness = 0.0;
   double correlation = 0.0;       ///< Final normalised EGI correlation C(R).
   double translation_peak = 0.0;  ///< Final phase-correlation peak height.
@@ -126,7 +138,7 @@ struct AlignResult {
   /// grid (0 without global search) and the windows of Algorithm 1.
   double search_voxel_size = 0.0;
   Eigen::Vector3i window_dims = Eigen::Vector3i::Zero();  ///< Voxels of the local window.
-  int polish_evaluations = 0;  ///< Phase correlations of the final polish (0 without).
+  int polish_evaluations = 0;           ///< Phase correlations of the final polish (0 without).
   std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
 };
 

@@ -20,7 +20,7 @@ using Transform = Eigen::Matrix4d;
 /// Invariants (checked on construction): every coordinate is finite; normals are
 /// either absent (0 rows) or one per point, finite, non-zero and stored unit length.
 class PointCloud {
-public:
+ public:
   PointCloud() = default;
 
   /// @param points  (N, 3) coordinates in metres.
@@ -42,7 +42,7 @@ public:
   /// @throws std::invalid_argument if the transform has non-finite entries.
   PointCloud transformed(const Transform& T_target_source) const;
 
-private:
+ private:
   Points points_;
   Points normals_;
 };

@@ -84,8 +84,8 @@ struct VoxelGrid {
 /// only the previous occupied box is cleared: a grid filled by hand must be zero outside
 /// its occupied box, as every grid made here is.
 /// @throws std::invalid_argument if the spec is invalid or over `limits`.
-void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy,
-                   VoxelGrid& grid, const GridLimits& limits = {});
+void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy, VoxelGrid& grid,
+                   const GridLimits& limits = {});
 
 /// Voxelizes a cloud. @throws std::invalid_argument if the cloud is empty.
 VoxelGrid voxelize(const PointCloud& cloud, const GridSpec& spec,

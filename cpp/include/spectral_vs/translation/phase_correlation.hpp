@@ -40,7 +40,7 @@ struct TranslationEstimate {
 /// `estimate` costs one forward and one inverse FFT. Not safe to call from two
 /// threads at once; distinct objects are independent.
 class PhaseCorrelation {
-public:
+ public:
   /// @throws std::invalid_argument for an invalid spec or params, or a grid over
   ///         params.limits (before allocating).
   explicit PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationParams& params = {});
@@ -66,7 +66,7 @@ public:
 
   const GridSpec& spec() const;
 
-private:
+ private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

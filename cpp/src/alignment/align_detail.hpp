@@ -1,0 +1,19 @@
+#pragma once
+// Internal to the aligner: the pieces of align() that ModelAligner shares with it.
+
+#include <spectral_vs/alignment/aligner.hpp>
+#include <spectral_vs/rotation/so3_correlation.hpp>
+
+#include <Eigen/Core>
+
+namespace spectral_vs::detail {
+
+/// The argument checks of align(). @throws std::invalid_argument as align() does.
+void check_align_params(const AlignParams& params);
+
+/// The rotation of one iteration of Algorithm 1 from the correlation at the current
+/// rotation (its gradient and Hessian): Newton or gradient law, capped at
+/// params.max_rotation_step; a rotation vector, radians.
+Eigen::Vector3d align_rotation_step(const CorrelationValue& c, const AlignParams& params);
+
+}  // namespace spectral_vs::detail

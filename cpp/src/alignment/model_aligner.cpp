@@ -1,0 +1,268 @@
+#include <spectral_vs/alignment/model_aligner.hpp>
+
+#include <spectral_vs/rotation/so3.hpp>
+#include <spectral_vs/rotation/so3_correlation.hpp>
+#include <spectral_vs/translation/phase_correlation.hpp>
+
+#include "alignment/align_detail.hpp"
+#include "alignment/fitness_map.hpp"
+#include "alignment/range_image.hpp"
+#include "common/checks.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <optional>
+
+namespace spectral_vs {
+
+using detail::fail;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// ceil(length / voxel_size), refused over the limit: the rule of the aligner's grids.
+int voxels_along(double length, double voxel_size, const GridLimits& limits) {
+  const double n = std::ceil(length / voxel_size);
+  const double limit = std::min(double(limits.max_voxels), double(kMaxGridIndex) / 2);
+  if (!(n <= limit)) {
+    fail("voxel_size: ", length, " m is ", n, " voxels of ", voxel_size,
+         " m along an axis, over the limit of ", limit, " voxels (max_voxels)");
+  }
+  return static_cast<int>(n);
+}
+
+// The bounded translation grid of align() (AlignParams::max_translation): the scene's box
+// and the model's where it starts, max_translation of room past them (once: the grid is
+// circular), a voxel of margin, FFT-friendly sizes. The same spec as align()'s
+// (SceneTranslation's bounded constructor), so the same poses.
+GridSpec bounded_spec(const Eigen::AlignedBox3d& scene_box, const Eigen::AlignedBox3d& model_box,
+                      double max_translation, double voxel_size, const GridLimits& limits) {
+  Eigen::AlignedBox3d cover = scene_box;
+  cover.extend(model_box);
+  cover.max().array() += max_translation;
+  const int shifts = 2 * voxels_along(max_translation, voxel_size, limits) + 2;
+  GridSpec spec;
+  spec.resolution = voxel_size;
+  spec.origin = ((cover.min() / voxel_size).array().floor() - 1.0).matrix() * voxel_size;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int needed = voxels_along(cover.max()[axis] - spec.origin[axis], voxel_size, limits) + 2;
+    spec.dims[axis] = fft_friendly_size(std::max(shifts, needed));
+  }
+  if (spec.voxel_count() > limits.max_voxels) {
+    fail("voxel_size: a translation grid of ", spec.dims.transpose(), " voxels at ", voxel_size,
+         " m exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
+  }
+  return spec;
+}
+
+// The model's pose as a rotation about its centroid c and a translation of it:
+// x_scene = R (x_model - c) + c + offset (as in align()).
+struct Pose {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+};
+
+}  // namespace
+
+struct ModelAligner::Impl {
+  PointCloud model;
+  AlignParams params;
+  // The model's side, prepared once.
+  Eigen::Vector3d centroid;
+  Points centred, normals;
+  double reach = 0.0;
+  ShCoefficients model_coefficients;
+  Eigen::Vector3i max_shift = Eigen::Vector3i::Zero();  // voxels, of max_translation
+  // Re-used per scene: the moved model, the translation grid's transforms and voxels.
+  Points moved, moved_normals;
+  std::optional<PhaseCorrelation> phase;
+  VoxelGrid target, moving;
+  detail::FitnessMap fitness_map;
+  ModelAlignerTimings timings;
+
+  bool local() const { return !params.global_search && params.max_translation > 0.0; }
+
+  Pose pose_of(const Transform& T_scene_model) const {
+    Pose pose;
+    pose.R = T_scene_model.topLeftCorner<3, 3>();
+    pose.offset = T_scene_model.topRightCorner<3, 1>() + pose.R * centroid - centroid;
+    return pose;
+  }
+
+  Transform transform_of(const Pose& pose) const {
+    Transform T = Transform::Identity();
+    T.topLeftCorner<3, 3>() = pose.R;
+    T.topRightCorner<3, 1>() = centroid + pose.offset - pose.R * centroid;
+    return T;
+  }
+
+  const Points& move(const Pose& pose) {
+    moved.noalias() = centred * pose.R.transpose();
+    moved.rowwise() += (centroid + pose.offset).transpose();
+    return moved;
+  }
+
+  // The fitness as align() scores it, built for this pose only.
+  double fitness(const PointCloud& scene, const GridSpec& map, const Pose& pose) {
+    moved_normals.noalias() = normals * pose.R.transpose();
+    const Points& points = move(pose);
+    if (!params.scene_viewpoint) return fitness_map.fitness(scene, map, points, moved_normals);
+    const detail::RangeImage view(scene, *params.scene_viewpoint,
+                                  0.5 * params.voxel_size);  // as align() makes it
+    return view.check(points, moved_normals, params.voxel_size).fitness();
+  }
+
+  // The scene's voxels and spectrum on the bounded grid around the model's start; the
+  // FFT plans and buffers are kept while the grid's size stays the same.
+  GridSpec place_grid(const PointCloud& scene, const Pose& start) {
+    const Points& at_start = move(start);
+    const Eigen::AlignedBox3d model_box(at_start.colwise().minCoeff().transpose(),
+                                        at_start.colwise().maxCoeff().transpose());
+    const GridSpec spec = bounded_spec(bounding_box(scene), model_box, params.max_translation,
+                                       params.voxel_size, params.limits);
+    if (!phase || phase->spec().dims != spec.dims) {
+      PhaseCorrelationParams p;
+      p.subvoxel = params.subvoxel;
+      p.threads = params.threads;
+      p.limits = params.limits;
+      phase.reset();  // free the old buffers before allocating the new ones
+      phase.emplace(spec, p);
+    }
+    voxelize_into(scene.points(), spec, params.occupancy, target, params.limits);
+    phase->set_target(target);
+    return spec;
+  }
+
+  // Algorithm 1 (eq. 16-17) on the bounded grid: run_algorithm1 of align() with the
+  // translation over the whole scene.
+  AlignResult run(const PointCloud& scene, const Transform& initial_guess,
+                  Clock::time_point started) {
+    const Clock::time_point deadline =
+        params.max_seconds == 0.0
+            ? Clock::time_point::max()
+            : started + std::chrono::duration_cast<Clock::duration>(
+                            std::chrono::duration<double>(std::min(params.max_seconds, 1e9)));
+    auto t = Clock::now();
+    const ShCoefficients scene_coefficients =
+        egi_coefficients(scene, params.bandwidth, params.egi_method);
+    So3Correlation correlation(scene_coefficients, model_coefficients, params.bandwidth, true);
+    timings.scene_coefficients = seconds_since(t);
+    t = Clock::now();
+    const GridSpec map = detail::FitnessMap::spec_of(scene, params.voxel_size, params.limits);
+    timings.scene_map = seconds_since(t);
+
+    t = Clock::now();
+    Pose pose = pose_of(initial_guess);
+    const GridSpec spec = place_grid(scene, pose);
+    const double target_energy = grid_energy(target);
+    timings.translation_grid = seconds_since(t);
+
+    const bool newton = params.rotation_step == RotationStep::newton;
+    AlignResult result;
+    for (int iteration = 0; iteration < params.max_iterations; ++iteration) {
+      const auto start = Clock::now();
+      const CorrelationValue c = correlation.evaluate(pose.R, newton);
+      pose.R = pose.R * exp_so3(detail::align_rotation_step(c, params));
+      const auto rotated = Clock::now();
+      timings.rotation += std::chrono::duration<double>(rotated - start).count();
+
+      voxelize_into(move(pose), spec, params.occupancy, moving, params.limits);
+      if (moving.empty()) fail("initial_guess: the model falls outside the scene's grid");
+      const TranslationEstimate shift = phase->estimate(moving, max_shift);
+      const Eigen::Vector3d step = params.translation_gain * shift.shift;
+      pose.offset += step;
+
+      AlignIteration record;
+      const auto translated = Clock::now();
+      timings.translation += std::chrono::duration<double>(translated - rotated).count();
+      record.seconds = std::chrono::duration<double>(translated - start).count();
+      record.translation_step = step.norm() / params.voxel_size;
+      record.rotation_gradient = c.gradient.norm();
+      record.correlation = c.value;
+      record.translation_peak = shift.peak;
+      record.translation_cost =
+          translation_cost(moving, target, Eigen::Vector3i::Zero(), target_energy);
+      record.rotation_cost =
+          rotation_cost(scene_coefficients, model_coefficients, pose.R, params.bandwidth, true);
+      record.T_scene_model = transform_of(pose);
+      result.history.push_back(record);
+      result.iterations = iteration + 1;
+      timings.records += seconds_since(translated);
+      if (record.translation_step + record.rotation_gradient < params.tolerance) {
+        result.converged = true;
+        result.stop_reason = AlignStopReason::converged;
+        break;
+      }
+      if (Clock::now() > deadline) {
+        result.stop_reason = AlignStopReason::max_seconds;
+        break;
+      }
+    }
+    t = Clock::now();
+    result.T_scene_model = transform_of(pose);
+    result.fitness = fitness(scene, map, pose);
+    result.correlation = correlation.evaluate(pose.R).value;
+    result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
+    timings.fitness = seconds_since(t);
+    return result;
+  }
+};
+
+ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
+    : impl_(std::make_unique<Impl>()) {
+  require_non_empty(model, "model");
+  require_normals(model, "model");
+  detail::check_align_params(params);
+  Impl& im = *impl_;
+  im.model = model;
+  im.params = params;
+  im.centroid = model.centroid();
+  im.centred = model.points().rowwise() - im.centroid.transpose();
+  im.normals = model.normals();
+  im.reach = im.centred.rowwise().norm().maxCoeff();
+  im.model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
+  if (im.local()) {
+    im.max_shift = Eigen::Vector3i::Constant(
+        voxels_along(params.max_translation, params.voxel_size, params.limits));
+  }
+}
+
+ModelAligner::~ModelAligner() = default;
+ModelAligner::ModelAligner(ModelAligner&&) noexcept = default;
+ModelAligner& ModelAligner::operator=(ModelAligner&&) noexcept = default;
+
+AlignResult ModelAligner::align(const PointCloud& scene) {
+  return align(scene, impl_->params.initial_guess);
+}
+
+AlignResult ModelAligner::align(const PointCloud& scene, const Transform& initial_guess) {
+  const Clock::time_point started = Clock::now();
+  Impl& im = *impl_;
+  require_non_empty(scene, "scene");
+  require_normals(scene, "scene");
+  require_rigid_transform(initial_guess, "initial_guess");
+  im.timings = {};
+  AlignResult result;
+  if (im.local()) {
+    result = im.run(scene, initial_guess, started);
+  } else {
+    AlignParams params = im.params;
+    params.initial_guess = initial_guess;
+    result = spectral_vs::align(im.model, scene, params);
+  }
+  im.timings.total = seconds_since(started);
+  return result;
+}
+
+const AlignParams& ModelAligner::params() const { return impl_->params; }
+const PointCloud& ModelAligner::model() const { return impl_->model; }
+const ShCoefficients& ModelAligner::model_coefficients() const { return impl_->model_coefficients; }
+const ModelAlignerTimings& ModelAligner::last_timings() const { return impl_->timings; }
+
+}  // namespace spectral_vs

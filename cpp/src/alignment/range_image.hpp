@@ -1,0 +1,62 @@
+#pragma once
+// Internal to the aligner: a single-view scene as its sensor saw it, to check a model
+// pose against what the sensor would then have seen.
+
+#include <spectral_vs/representation/point_cloud.hpp>
+
+#include <Eigen/Geometry>
+#include <vector>
+
+namespace spectral_vs::detail {
+
+/// What one view of the model at a pose says, per pixel of the model's own depth image
+/// (its nearest points facing the sensor): the scan has a surface there, turned the same
+/// way within 45 degrees (`confirmed`); the scan saw through it, farther or nowhere, or
+/// saw a surface there turned another way (`contradicted`); or the scan saw something
+/// nearer that hides it (`hidden`).
+struct ViewCheck {
+  int confirmed = 0;
+  int contradicted = 0;
+  int hidden = 0;
+
+  /// confirmed / (confirmed + contradicted + hidden / 2), in [0, 1]: a hidden pixel
+  /// neither confirms nor refutes a pose, but a pose tucked behind other surfaces should
+  /// not score as well as one the scan shows (measured: half weight ranked the poses of
+  /// single views and clutter best among 0, 1/4, 1/2 and 1).
+  double fitness() const;
+};
+
+/// The scene's depth image from the sensor origin: one pixel per `pixel` radians, the
+/// nearest scene point per pixel, empty pixels filled from their nearest neighbours
+/// (missing returns, sparser scans).
+class RangeImage {
+ public:
+  /// `pixel_size`: metres per pixel at the median distance of the scene.
+  /// @throws std::invalid_argument if no scene point is in front of `viewpoint`.
+  RangeImage(const PointCloud& scene, const Eigen::Vector3d& viewpoint, double pixel_size);
+
+  /// The check of model points with their normals, in scene coordinates; `tolerance`:
+  /// depth difference, metres, within which a model point is on the scanned surface.
+  ViewCheck check(const Points& points, const Points& normals, double tolerance) const;
+
+ private:
+  struct Pixel {
+    int u, v;
+    float depth;
+    Eigen::Index row;
+  };
+  bool project(const Eigen::Vector3d& p, Pixel& pixel) const;
+  std::size_t index(int u, int v) const {
+    return std::size_t(v - v0_) * std::size_t(width_) + std::size_t(u - u0_);
+  }
+
+  Eigen::Vector3d viewpoint_;
+  Eigen::Matrix3d R_camera_scene_;  // rows: image x, image y, viewing axis
+  double angle_ = 0.0;              // radians per pixel
+  int u0_ = 0, v0_ = 0, width_ = 0, height_ = 0;
+  std::vector<float> depth_;             // +inf where the scan saw nothing
+  std::vector<Eigen::Vector3f> normal_;  // of the nearest scan point
+  mutable std::vector<Pixel> model_;     // scratch of check()
+};
+
+}  // namespace spectral_vs::detail

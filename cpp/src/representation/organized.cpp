@@ -1,0 +1,149 @@
+#include <spectral_vs/representation/organized.hpp>
+
+#include "common/checks.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace spectral_vs {
+
+using detail::fail;
+
+namespace {
+
+void check(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params) {
+  detail::require_positive_finite(intrinsics.fx, "fx");
+  detail::require_positive_finite(intrinsics.fy, "fy");
+  if (!std::isfinite(intrinsics.cx) || !std::isfinite(intrinsics.cy)) {
+    fail("the principal point (cx, cy) must be finite, got (", intrinsics.cx, ", ", intrinsics.cy,
+         ")");
+  }
+  if (params.normal_step < 1) fail("normal_step must be >= 1, got ", params.normal_step);
+  if (params.window < 1 || params.window % 2 == 0)
+    fail("window must be odd and >= 1, got ", params.window);
+  if (!(params.max_depth_jump > 0.0))
+    fail("max_depth_jump must be > 0, got ", params.max_depth_jump);
+  if (params.stride < 1) fail("stride must be >= 1, got ", params.stride);
+}
+
+// Scratch buffers kept per thread: a servo converts one image of the same size per step.
+struct Scratch {
+  std::vector<double> cross[3];    // per interior pixel, zero where unreliable
+  std::vector<double> columns[3];  // per kept interior row: sums over the window's rows
+  std::vector<unsigned char> reliable;
+  std::vector<double> kept;  // per kept pixel: point, then normal
+};
+
+}  // namespace
+
+PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,
+                           const PinholeIntrinsics& intrinsics,
+                           const OrganizedNormalParams& params) {
+  check(intrinsics, params);
+  const int h = static_cast<int>(depth.rows()), w = static_cast<int>(depth.cols());
+  const int s = params.normal_step, r = params.window / 2, stride = params.stride;
+  if (h <= 2 * s || w <= 2 * s) return PointCloud(Points(0, 3), Points(0, 3));
+
+  // Back-projection factors of each column and row: x = d (u - cx) / fx, y = d (v - cy) / fy.
+  std::vector<double> along_u(static_cast<std::size_t>(w)), along_v(static_cast<std::size_t>(h));
+  for (int u = 0; u < w; ++u) along_u[std::size_t(u)] = (u - intrinsics.cx) / intrinsics.fx;
+  for (int v = 0; v < h; ++v) along_v[std::size_t(v)] = (v - intrinsics.cy) / intrinsics.fy;
+  const double* d = depth.data();
+  auto at = [&](int v, int u) { return d[std::size_t(v) * std::size_t(w) + std::size_t(u)]; };
+
+  // The interior (rows and columns s .. size - s - 1), where the whole stencil exists.
+  const int ih = h - 2 * s, iw = w - 2 * s;
+  const std::size_t interior = std::size_t(ih) * std::size_t(iw);
+  thread_local Scratch per_thread;
+  Scratch& scratch = per_thread;  // one look-up of the thread's buffers, not one per access
+  for (auto& c : scratch.cross) c.assign(interior, 0.0);
+  scratch.reliable.assign(interior, 0);
+  double* const cross_x = scratch.cross[0].data();
+  double* const cross_y = scratch.cross[1].data();
+  double* const cross_z = scratch.cross[2].data();
+  unsigned char* const reliable = scratch.reliable.data();
+  for (int i = 0; i < ih; ++i) {
+    const int v = i + s;
+    const double yv = along_v[std::size_t(v)], y_up = along_v[std::size_t(v - s)],
+                 y_down = along_v[std::size_t(v + s)];
+    for (int j = 0; j < iw; ++j) {
+      const int u = j + s;
+      const double z = at(v, u);
+      if (!std::isfinite(z)) continue;
+      const double limit = params.max_depth_jump * z;
+      const double z_right = at(v, u + s), z_left = at(v, u - s), z_down = at(v + s, u),
+                   z_up = at(v - s, u);
+      // Written so that a NaN neighbour fails the test.
+      if (!(std::abs(z_right - z) <= limit && std::abs(z_left - z) <= limit &&
+            std::abs(z_down - z) <= limit && std::abs(z_up - z) <= limit)) {
+        continue;
+      }
+      const double xu_right = along_u[std::size_t(u + s)], xu_left = along_u[std::size_t(u - s)],
+                   xu = along_u[std::size_t(u)];
+      // Central differences along the columns (a) and the rows (b).
+      const double ax = z_right * xu_right - z_left * xu_left, ay = z_right * yv - z_left * yv,
+                   az = z_right - z_left;
+      const double bx = z_down * xu - z_up * xu, by = z_down * y_down - z_up * y_up,
+                   bz = z_down - z_up;
+      const std::size_t k = std::size_t(i) * std::size_t(iw) + std::size_t(j);
+      cross_x[k] = by * az - bz * ay;
+      cross_y[k] = bz * ax - bx * az;
+      cross_z[k] = bx * ay - by * ax;
+      reliable[k] = 1;
+    }
+  }
+
+  // Kept pixels: v, u multiples of the stride inside the interior.
+  const int first = (s + stride - 1) / stride * stride;  // the first multiple of the stride >= s
+  const int kept_rows = first < h - s ? (h - s - 1 - first) / stride + 1 : 0;
+  const int kept_columns = first < w - s ? (w - s - 1 - first) / stride + 1 : 0;
+  std::vector<double>& out = scratch.kept;
+  out.clear();
+  out.reserve(std::size_t(kept_rows) * std::size_t(kept_columns) * 6);
+  // Column sums with r zeros on either side: the window's columns need no bounds test.
+  for (auto& c : scratch.columns) c.assign(std::size_t(iw + 2 * r), 0.0);
+  double* const columns[3] = {scratch.columns[0].data() + r, scratch.columns[1].data() + r,
+                              scratch.columns[2].data() + r};
+  const double* const crosses[3] = {cross_x, cross_y, cross_z};
+  for (int v = first; v < h - s; v += stride) {
+    const int i = v - s;
+    // Sums over the window's rows (zero outside the interior), for every interior column.
+    for (int c = 0; c < 3; ++c) {
+      double* column = columns[c];
+      std::fill(column, column + iw, 0.0);
+      for (int row = std::max(i - r, 0); row <= std::min(i + r, ih - 1); ++row) {
+        const double* line = crosses[c] + std::size_t(row) * std::size_t(iw);
+        for (int j = 0; j < iw; ++j) column[j] += line[j];
+      }
+    }
+    const double yv = along_v[std::size_t(v)];
+    for (int u = first; u < w - s; u += stride) {
+      const int j = u - s;
+      if (!reliable[std::size_t(i) * std::size_t(iw) + std::size_t(j)]) continue;
+      double n[3];
+      for (int c = 0; c < 3; ++c) {
+        double sum = 0.0;
+        for (int dj = -r; dj <= r; ++dj) sum += columns[c][j + dj];
+        n[c] = sum;
+      }
+      const double norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      if (!(norm > 0.0)) continue;
+      const double z = at(v, u), x = z * along_u[std::size_t(u)], y = z * yv;
+      // Toward the camera: n . (0 - p) > 0.
+      const double scale = (n[0] * x + n[1] * y + n[2] * z > 0.0 ? -1.0 : 1.0) / norm;
+      out.insert(out.end(), {x, y, z, n[0] * scale, n[1] * scale, n[2] * scale});
+    }
+  }
+  // Allocated at their size only now (a frame's cloud is megabytes).
+  const Eigen::Index kept = Eigen::Index(out.size() / 6);
+  Points points(kept, 3), normals(kept, 3);
+  for (Eigen::Index i = 0; i < kept; ++i) {
+    const double* row = out.data() + 6 * i;
+    points.row(i) << row[0], row[1], row[2];
+    normals.row(i) << row[3], row[4], row[5];
+  }
+  return PointCloud(std::move(points), std::move(normals));
+}
+
+}  // namespace spectral_vs

@@ -1,0 +1,197 @@
+// The aligner's internal views of a scene: the range image that checks a pose against
+// what a single view saw, the connected parts of a cluttered scene, and its support plane.
+
+#include "alignment/range_image.hpp"
+#include "alignment/scene_map.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+#include <set>
+#include <vector>
+
+namespace spectral_vs::detail {
+namespace {
+
+// A square patch of the plane z = depth, `half` metres each side of (x, y), sampled
+// every `step` metres, with the given normal.
+PointCloud patch(double x, double y, double depth, double half, double step,
+                 const Eigen::Vector3d& normal) {
+  std::vector<Eigen::Vector3d> points;
+  for (double u = -half; u <= half + 1e-12; u += step) {
+    for (double v = -half; v <= half + 1e-12; v += step) points.emplace_back(x + u, y + v, depth);
+  }
+  Points p(Eigen::Index(points.size()), 3), n(Eigen::Index(points.size()), 3);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    p.row(Eigen::Index(i)) = points[i].transpose();
+    n.row(Eigen::Index(i)) = normal.transpose();
+  }
+  return PointCloud(p, n);
+}
+
+const Eigen::Vector3d kToSensor(0.0, 0.0, -1.0);  // the sensor at the origin looks along +z
+
+class ViewOfAWall : public ::testing::Test {
+ protected:
+  // A wall 1 m in front of the sensor, 0.6 m wide, scanned every 2 mm; pixels of 4 mm.
+  PointCloud wall = patch(0.0, 0.0, 1.0, 0.3, 0.002, kToSensor);
+  RangeImage image{wall, Eigen::Vector3d::Zero(), 0.004};
+  double tolerance = 0.008;
+};
+
+TEST_F(ViewOfAWall, ASurfaceOnTheWallIsConfirmed) {
+  const PointCloud model = patch(0.05, -0.02, 1.003, 0.05, 0.003, kToSensor);
+  const ViewCheck check = image.check(model.points(), model.normals(), tolerance);
+  EXPECT_GT(check.confirmed, 400);  // a 0.1 m square in 4 mm pixels: about 625
+  EXPECT_EQ(check.contradicted, 0);
+  EXPECT_EQ(check.hidden, 0);
+  EXPECT_DOUBLE_EQ(check.fitness(), 1.0);
+}
+
+TEST_F(ViewOfAWall, ASurfaceInFrontOfTheWallIsContradicted) {
+  // The sensor saw the wall through where this surface would be.
+  const PointCloud model = patch(0.0, 0.0, 0.95, 0.05, 0.003, kToSensor);
+  const ViewCheck check = image.check(model.points(), model.normals(), tolerance);
+  EXPECT_GT(check.contradicted, 400);
+  EXPECT_EQ(check.confirmed, 0);
+  EXPECT_DOUBLE_EQ(check.fitness(), 0.0);
+}
+
+TEST_F(ViewOfAWall, ASurfaceBehindTheWallIsHidden) {
+  const PointCloud model = patch(0.0, 0.0, 1.05, 0.05, 0.003, kToSensor);
+  const ViewCheck check = image.check(model.points(), model.normals(), tolerance);
+  EXPECT_GT(check.hidden, 400);
+  EXPECT_EQ(check.confirmed + check.contradicted, 0);
+}
+
+TEST_F(ViewOfAWall, ASurfaceTurnedAwayFromTheWallsNormalIsContradicted) {
+  // On the wall, but its normal 60 degrees from the wall's: not the surface scanned.
+  const Eigen::Vector3d turned(std::sin(M_PI / 3.0), 0.0, -std::cos(M_PI / 3.0));
+  const PointCloud model = patch(0.0, 0.0, 1.0, 0.05, 0.003, turned);
+  const ViewCheck check = image.check(model.points(), model.normals(), tolerance);
+  EXPECT_GT(check.contradicted, 400);
+  EXPECT_EQ(check.confirmed, 0);
+}
+
+TEST_F(ViewOfAWall, OnlyTheNearestSideFacingTheSensorCounts) {
+  // Two sheets, one in front on the wall and one 5 cm behind it: the second is the model's
+  // own hidden side, and the sheet facing away is not seen at all.
+  const PointCloud front = patch(0.0, 0.0, 1.0, 0.05, 0.003, kToSensor);
+  const PointCloud back = patch(0.0, 0.0, 1.05, 0.05, 0.003, kToSensor);
+  const PointCloud away = patch(0.0, 0.0, 0.9, 0.05, 0.003, -kToSensor);
+  Points points(front.points().rows() * 3, 3), normals(points.rows(), 3);
+  points << front.points(), back.points(), away.points();
+  normals << front.normals(), back.normals(), away.normals();
+  const ViewCheck check = image.check(points, normals, tolerance);
+  EXPECT_EQ(check.contradicted + check.hidden, 0);
+  EXPECT_GT(check.confirmed, 400);
+}
+
+TEST_F(ViewOfAWall, HiddenPixelsWeighHalf) {
+  ViewCheck check;
+  check.confirmed = 100;
+  check.hidden = 100;
+  EXPECT_DOUBLE_EQ(check.fitness(), 100.0 / 150.0);
+  check.contradicted = 50;
+  EXPECT_DOUBLE_EQ(check.fitness(), 100.0 / 200.0);
+  EXPECT_DOUBLE_EQ(ViewCheck{}.fitness(), 0.0);
+}
+
+TEST_F(ViewOfAWall, MissingReturnsAreFilledFromTheirNeighbours) {
+  // Every other scan row missing: the 2 mm rows left are still no look through.
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index i = 0; i < wall.points().rows(); ++i) {
+    if (std::lround(wall.points()(i, 1) / 0.002) % 3 != 0) rows.push_back(i);
+  }
+  Points p(Eigen::Index(rows.size()), 3), n(Eigen::Index(rows.size()), 3);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    p.row(Eigen::Index(i)) = wall.points().row(rows[i]);
+    n.row(Eigen::Index(i)) = wall.normals().row(rows[i]);
+  }
+  const RangeImage sparse(PointCloud(p, n), Eigen::Vector3d::Zero(), 0.002);
+  const PointCloud model = patch(0.0, 0.0, 1.0, 0.05, 0.001, kToSensor);
+  const ViewCheck check = sparse.check(model.points(), model.normals(), tolerance);
+  EXPECT_EQ(check.contradicted, 0);
+}
+
+TEST(RangeImage, RefusesAViewpointWithNoDirectionToLookIn) {
+  const PointCloud wall = patch(0.0, 0.0, 1.0, 0.1, 0.01, kToSensor);
+  EXPECT_THROW(RangeImage(wall, wall.centroid(), 0.004), std::invalid_argument);
+  EXPECT_NO_THROW(RangeImage(wall, Eigen::Vector3d(0.0, 0.0, 2.0), 0.004));  // the wall's back
+}
+
+// Single linkage by brute force: the reference for connected_parts.
+std::set<std::vector<Eigen::Index>> brute_force_parts(const Points& points, double tolerance) {
+  const Eigen::Index n = points.rows();
+  std::vector<int> label(std::size_t(n), -1);
+  int parts = 0;
+  for (Eigen::Index seed = 0; seed < n; ++seed) {
+    if (label[std::size_t(seed)] >= 0) continue;
+    std::vector<Eigen::Index> stack{seed};
+    label[std::size_t(seed)] = parts;
+    while (!stack.empty()) {
+      const Eigen::Index i = stack.back();
+      stack.pop_back();
+      for (Eigen::Index j = 0; j < n; ++j) {
+        if (label[std::size_t(j)] < 0 && (points.row(i) - points.row(j)).norm() <= tolerance) {
+          label[std::size_t(j)] = parts;
+          stack.push_back(j);
+        }
+      }
+    }
+    ++parts;
+  }
+  std::vector<std::vector<Eigen::Index>> grouped(static_cast<std::size_t>(parts));
+  for (Eigen::Index i = 0; i < n; ++i) grouped[std::size_t(label[std::size_t(i)])].push_back(i);
+  return {grouped.begin(), grouped.end()};
+}
+
+TEST(ConnectedParts, AgreeWithSingleLinkageByBruteForce) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uniform(0.0, 0.1);
+  for (int trial = 0; trial < 5; ++trial) {
+    Points points(600, 3);
+    for (Eigen::Index i = 0; i < points.rows(); ++i)
+      points.row(i) << uniform(rng), uniform(rng), uniform(rng);
+    const double tolerance = 0.006 + 0.002 * trial;  // from many parts to a few
+    const auto parts = connected_parts(points, tolerance);
+    const std::set<std::vector<Eigen::Index>> found(parts.begin(), parts.end());
+    EXPECT_EQ(found, brute_force_parts(points, tolerance)) << "tolerance " << tolerance;
+    for (std::size_t k = 1; k < parts.size(); ++k) EXPECT_GE(parts[k - 1].size(), parts[k].size());
+  }
+}
+
+TEST(ConnectedParts, ObjectsAGapApartStayApart) {
+  const PointCloud left = patch(0.0, 0.0, 1.0, 0.05, 0.004, kToSensor);
+  const PointCloud right = patch(0.107, 0.0, 1.0, 0.05, 0.004, kToSensor);  // a 7 mm gap
+  Points points(left.points().rows() * 2, 3);
+  points << left.points(), right.points();
+  EXPECT_EQ(connected_parts(points, 0.006).size(), 2u);
+  EXPECT_EQ(connected_parts(points, 0.008).size(), 1u);
+}
+
+TEST(SupportPlane, FindsTheTableAndTheSideTheObjectsAreOn) {
+  // A 0.7 m table top at z = 0.02 seen from above, a 0.1 m box standing on it.
+  const PointCloud table = patch(0.0, 0.0, 0.02, 0.35, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud top = patch(0.1, 0.1, 0.12, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  Points points(table.points().rows() + top.points().rows(), 3), normals(points.rows(), 3);
+  points << table.points(), top.points();
+  normals << table.normals(), top.normals();
+  const PointCloud scene(points, normals);
+  const auto plane = support_plane(scene, 0.008, 0.4);
+  ASSERT_TRUE(plane);
+  EXPECT_NEAR(plane->normal.z(), 1.0, 1e-9);
+  EXPECT_NEAR(plane->offset, 0.02, 0.008);  // within a voxel bin
+  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4).size(), std::size_t(top.points().rows()));
+  // Seen from below (normals and the box flipped), the plane's normal turns too.
+  Points flipped = -points;
+  const auto below = support_plane(PointCloud(flipped, -normals), 0.008, 0.4);
+  ASSERT_TRUE(below);
+  EXPECT_NEAR(below->normal.z(), -1.0, 1e-9);
+  // Narrower than min_extent: no support plane.
+  EXPECT_FALSE(support_plane(scene, 0.008, 2.0));
+}
+
+}  // namespace
+}  // namespace spectral_vs::detail
