@@ -80,6 +80,11 @@ polish : bool
     True); skipped for models sampled sparser than 2 points per occupied voxel. For a
     model whose EGI has a flat axis (a mug's), turns about that axis every 15 degrees are
     scored first.
+icp_refinement : bool
+    With global search, last: a point-to-plane ICP from the result (pairs within
+    voxel_size whose normals agree within 45 degrees; with scene_viewpoint the model's
+    points facing it only), kept unless it lowers fitness by more than 0.05 (default
+    True). The one step that is not spectral.
 subvoxel : bool
     Sub-voxel refinement of the phase-correlation peak.
 occupancy : str
@@ -125,6 +130,7 @@ max_voxels : int
       .def_readwrite("scene_viewpoint", &AlignParams::scene_viewpoint)
       .def_readwrite("suppress_support_plane", &AlignParams::suppress_support_plane)
       .def_readwrite("polish", &AlignParams::polish)
+      .def_readwrite("icp_refinement", &AlignParams::icp_refinement)
       .def_readwrite("subvoxel", &AlignParams::subvoxel)
       .def_property(
           "occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
@@ -187,6 +193,8 @@ max_voxels : int
                     "Voxel of the global search's translation grid, metres (0 without it).")
       .def_readonly("polish_evaluations", &AlignResult::polish_evaluations,
                     "Phase correlations of the final polish (0 without).")
+      .def_readonly("icp_iterations", &AlignResult::icp_iterations,
+                    "Steps of the ICP refinement (0 without, or if not kept).")
       .def_property_readonly(
           "window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
           "Voxels of the window Algorithm 1 ran in, per axis.")

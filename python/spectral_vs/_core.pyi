@@ -320,6 +320,7 @@ class AlignParams:
     scene_viewpoint: _Array | None  # (3,) metres
     suppress_support_plane: bool
     polish: bool
+    icp_refinement: bool
     subvoxel: bool
     occupancy: str  # "trilinear", "binary" or "count"
     egi_method: str  # "projection" or "histogram"
@@ -371,6 +372,8 @@ class AlignResult:
     def window_dims(self) -> _IntArray: ...  # (3,)
     @property
     def polish_evaluations(self) -> int: ...
+    @property
+    def icp_iterations(self) -> int: ...
     @property
     def history(self) -> list[AlignIteration]: ...
 

@@ -1,8 +1,13 @@
-// The aligner's internal views of a scene: the range image that checks a pose against
-// what a single view saw, the connected parts of a cluttered scene, and its support plane.
+// The aligner's internals: the range image that checks a pose against what a single
+// view saw, the connected parts of a cluttered scene, its support plane, and the final
+// point-to-plane ICP.
 
+#include "alignment/icp_refinement.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
+#include "test_support.hpp"
+
+#include <spectral_vs/rotation/so3.hpp>
 
 #include <gtest/gtest.h>
 
@@ -191,6 +196,56 @@ TEST(SupportPlane, FindsTheTableAndTheSideTheObjectsAreOn) {
   EXPECT_NEAR(below->normal.z(), -1.0, 1e-9);
   // Narrower than min_extent: no support plane.
   EXPECT_FALSE(support_plane(scene, 0.008, 2.0));
+}
+
+double rotation_error_deg(const Transform& a, const Transform& b) {
+  const Eigen::Matrix3d d = a.topLeftCorner<3, 3>().transpose() * b.topLeftCorner<3, 3>();
+  return Eigen::AngleAxisd(d).angle() * 180.0 / M_PI;
+}
+
+// A scene made of the model itself, independently resampled, moved by a known motion.
+class IcpOnAResampledCopy : public ::testing::Test {
+ protected:
+  std::mt19937 rng{21};
+  PointCloud model = test::box_and_sphere(4000, rng);
+  Transform truth = [] {
+    Transform T = Transform::Identity();
+    T.topLeftCorner<3, 3>() = exp_so3(Eigen::Vector3d(0.3, -0.5, 0.8));
+    T.topRightCorner<3, 1>() = Eigen::Vector3d(0.05, -0.02, 0.4);
+    return T;
+  }();
+  PointCloud scene = test::box_and_sphere(4000, rng).transformed(truth);
+};
+
+TEST_F(IcpOnAResampledCopy, RecoversTheMotionFromAStartADegreeAndMillimetresOff) {
+  Transform start = truth;
+  start.topLeftCorner<3, 3>() =
+      exp_so3(Eigen::Vector3d(0.01, -0.012, 0.008)) * truth.topLeftCorner<3, 3>();
+  start.topRightCorner<3, 1>() += Eigen::Vector3d(0.003, -0.002, 0.002);
+  const IcpOutcome outcome = refine_point_to_plane(model, scene, start, IcpSettings{});
+  EXPECT_GT(outcome.iterations, 1);
+  EXPECT_GT(outcome.pairs, 3000);
+  // Two samplings of one surface: the residual is the sampling, well under a voxel.
+  EXPECT_LT(rotation_error_deg(outcome.T_scene_model, truth), 0.1);
+  EXPECT_LT((outcome.T_scene_model.topRightCorner<3, 1>() - truth.topRightCorner<3, 1>()).norm(),
+            0.0005);
+  EXPECT_GT(rotation_error_deg(start, truth), 0.9);
+}
+
+TEST_F(IcpOnAResampledCopy, OnlyThePointsFacingTheViewpointTakePart) {
+  IcpSettings settings;
+  settings.viewpoint = Eigen::Vector3d(0.05, -0.02, 2.0);  // above the moved model
+  const IcpOutcome seen = refine_point_to_plane(model, scene, truth, settings);
+  const IcpOutcome all = refine_point_to_plane(model, scene, truth, IcpSettings{});
+  EXPECT_GT(seen.pairs, 200);
+  EXPECT_LT(seen.pairs, all.pairs * 3 / 4);
+}
+
+TEST_F(IcpOnAResampledCopy, FarFromTheSceneThePoseIsReturnedUnchanged) {
+  const Transform away = test::translation(Eigen::Vector3d(1.0, 0.0, 0.0)) * truth;
+  const IcpOutcome outcome = refine_point_to_plane(model, scene, away, IcpSettings{});
+  EXPECT_EQ(outcome.iterations, 0);
+  EXPECT_TRUE(outcome.T_scene_model.isApprox(away));
 }
 
 }  // namespace

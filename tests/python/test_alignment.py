@@ -243,3 +243,24 @@ def test_part_search_finds_the_target_in_clutter():
         rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
         successes += rotation_deg < 5.0 and translation_m < 0.010
     assert successes >= 11
+
+
+def test_icp_refinement_tightens_the_spectral_result():
+    """The final point-to-plane ICP starts where the spectral search ended (about 0.3
+    degree / 0.3 mm off on full models: the 8 mm grid's and the EGI's floor) and ends
+    near the sampling's own limit; the same successes. The first 9 full-model cases at 60
+    degrees, measured: median 0.25 deg / 0.39 mm without, 0.12 deg / 0.09 mm with, on a
+    pilot of 35."""
+    cases = _benchmark_cases()
+    errors = {False: [], True: []}
+    for spec in cases.case_specs(["full"], [60.0], 9):
+        case = cases.make_case(spec)
+        for icp in (False, True):
+            result = svs.align(case.model_cloud(), case.scene_cloud(), icp_refinement=icp)
+            rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
+            assert rotation_deg < 5.0 and translation_m < 0.010, (spec.case_id, icp)
+            assert (result.icp_iterations > 0) == icp
+            errors[icp].append((rotation_deg, 1000 * translation_m))
+    without, with_icp = np.median(errors[False], axis=0), np.median(errors[True], axis=0)
+    assert with_icp[0] < 0.2 and with_icp[1] < 0.2, with_icp  # degrees, mm
+    assert with_icp[0] < without[0] and with_icp[1] < without[1]

@@ -5,6 +5,7 @@
 #include <spectral_vs/rotation/so3_search.hpp>
 
 #include "alignment/align_detail.hpp"
+#include "alignment/icp_refinement.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
@@ -625,6 +626,27 @@ void polish_result(const Problem& problem, const std::optional<Eigen::Vector3d>&
       problem.model.fitness(problem.scene, problem.view, polished, problem.params.voxel_size);
 }
 
+// The ICP refinement of the kept result (AlignParams::icp_refinement), against the whole
+// scene; kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
+constexpr double kIcpFitnessLoss = 0.05;
+
+void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
+                     AlignResult& result) {
+  detail::IcpSettings settings;
+  settings.max_distance = problem.params.voxel_size;
+  settings.viewpoint = problem.params.scene_viewpoint;
+  const detail::IcpOutcome outcome =
+      detail::refine_point_to_plane(model, scene, result.T_scene_model, settings);
+  if (outcome.iterations == 0) return;
+  const double fitness = problem.model.fitness(problem.scene, problem.view,
+                                               problem.model.pose_of(outcome.T_scene_model),
+                                               problem.params.voxel_size);
+  if (fitness < result.fitness - kIcpFitnessLoss) return;
+  result.T_scene_model = outcome.T_scene_model;
+  result.fitness = fitness;
+  result.icp_iterations = outcome.iterations;
+}
+
 bool better(const AlignResult& a, const AlignResult& b) {
   if (a.fitness != b.fitness) return a.fitness > b.fitness;
   return a.correlation > b.correlation;
@@ -712,8 +734,9 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     // An unfinished search claims nothing: the pose is the best found in time.
     best.converged = false;
     best.stop_reason = AlignStopReason::max_seconds;
-  } else if (params.polish) {
-    polish_result(problem, axis, window, best);
+  } else {
+    if (params.polish) polish_result(problem, axis, window, best);
+    if (params.icp_refinement) refine_with_icp(problem, model, scene, best);
   }
   best.search_voxel_size = search_voxel;
   return best;

@@ -75,15 +75,22 @@ struct AlignParams {
   /// model's reach and 4 reaches; the 8 largest) gets its own SO(3) search on its own EGI,
   /// its rotations placed by phase correlation in a window around it.
   bool suppress_support_plane = true;
-  bool polish = true;    ///< With global search: after Algorithm 1, a pattern search on
-                         ///< the rotation (4 to 1/4 degree steps) for the best overlap
-                         ///< of the model's voxels with the scene's, past the EGI's
-                         ///< accuracy floor. Skipped for models sampled sparser than
-                         ///< 2 points per occupied voxel. For a model whose EGI has a
-                         ///< flat axis (its smallest autocorrelation curvature under a
-                         ///< tenth of the largest: a mug's axis, its handle a few
-                         ///< percent of the normals), turns about that axis every 15
-                         ///< degrees are scored by the same overlap first.
+  bool polish = true;  ///< With global search: after Algorithm 1, a pattern search on
+                       ///< the rotation (4 to 1/4 degree steps) for the best overlap
+                       ///< of the model's voxels with the scene's, past the EGI's
+                       ///< accuracy floor. Skipped for models sampled sparser than
+                       ///< 2 points per occupied voxel. For a model whose EGI has a
+                       ///< flat axis (its smallest autocorrelation curvature under a
+                       ///< tenth of the largest: a mug's axis, its handle a few
+                       ///< percent of the normals), turns about that axis every 15
+                       ///< degrees are scored by the same overlap first.
+  /// With global search, last: a point-to-plane ICP from the result (each model point
+  /// paired with its nearest scene point within voxel_size whose normal agrees within 45
+  /// degrees; with scene_viewpoint, the model points facing it only; Gauss-Newton, up to
+  /// 30 steps), kept unless it lowers fitness by more than 0.05. Not spectral: the one
+  /// local step, past the voxel grid's and the EGI's accuracy (docs/experiments.md
+  /// measures with and without).
+  bool icp_refinement = true;
   bool subvoxel = true;  ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;    ///< Voxel values (the paper: binary).
   EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
@@ -138,7 +145,8 @@ struct AlignResult {
   /// grid (0 without global search) and the windows of Algorithm 1.
   double search_voxel_size = 0.0;
   Eigen::Vector3i window_dims = Eigen::Vector3i::Zero();  ///< Voxels of the local window.
-  int polish_evaluations = 0;           ///< Phase correlations of the final polish (0 without).
+  int polish_evaluations = 0;  ///< Phase correlations of the final polish (0 without).
+  int icp_iterations = 0;      ///< Steps of the ICP refinement (0 without, or if not kept).
   std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
 };
 
