@@ -224,7 +224,7 @@ TEST_F(IcpOnAResampledCopy, RecoversTheMotionFromAStartADegreeAndMillimetresOff)
   start.topRightCorner<3, 1>() += Eigen::Vector3d(0.003, -0.002, 0.002);
   const IcpOutcome outcome = refine_point_to_plane(model, scene, start, IcpSettings{});
   EXPECT_GT(outcome.iterations, 1);
-  EXPECT_GT(outcome.pairs, 3000);
+  EXPECT_GT(outcome.pairs, 1500);  // of about 2000 points taking part (one in 2 of 4000)
   // Two samplings of one surface: the residual is the sampling, well under a voxel.
   EXPECT_LT(rotation_error_deg(outcome.T_scene_model, truth), 0.1);
   EXPECT_LT((outcome.T_scene_model.topRightCorner<3, 1>() - truth.topRightCorner<3, 1>()).norm(),

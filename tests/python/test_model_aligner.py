@@ -90,7 +90,8 @@ def test_servo_estimate_is_the_plain_alignment(views):
     scene = table_top()
     desired = camera_pose()
     current = camera_pose((0.01, -0.01, 0.005), (0.5, -0.5, 0.5))
-    servo = SpectralServo(view(scene, desired), ServoParams(mode="pose"))
+    # Downsampled to half a voxel, as prepared() does.
+    servo = SpectralServo(view(scene, desired), ServoParams(mode="pose", downsample_size=0.0075))
     T, result = servo.estimate(view(scene, current))
     plain = _core._align(servo.reference, prepared(view(scene, current)), servo._align_params)
     assert_same(result, plain)

@@ -16,6 +16,7 @@ import spectral_vs as svs
 from spectral_vs.servo import (
     ServoParams,
     SpectralServo,
+    dominant_normal,
     pose_error,
     rotation_matrix,
     rotation_vector,
@@ -169,6 +170,10 @@ def test_params_are_checked():
         ServoParams(align_overrides={"no_such_setting": 1}).align_params()
     with pytest.raises(ValueError, match="min_points"):
         SpectralServo(np.zeros((10, 3)), ServoParams(min_points=500))
+    with pytest.raises(ValueError, match="plane_cone"):
+        ServoParams(plane_cone=math.radians(95))
+    with pytest.raises(ValueError, match="min_plane_share"):
+        ServoParams(min_plane_share=-0.1)
 
 
 # --- The estimate on the synthetic table top ---------------------------------------------
@@ -216,6 +221,80 @@ def test_integrated_twist_converges_on_the_synthetic_scene(scene, desired, mode,
     t_mm, r_deg = errors_mm_deg(current, desired)
     assert t_mm < 3.0  # measured about 1 mm
     assert r_deg < 0.5  # measured about 0.2 degrees
+
+
+def _loop(servo, scene, current, desired, steps):
+    """Integrate the servo's twist (dt = 0.1 s) from ``current``: the last status and pose."""
+    status, motion = None, None
+    for _ in range(steps):
+        twist, status = servo.step(view(scene, current), motion)
+        if status.state != "running":
+            break
+        motion = np.linalg.inv(current) @ moved(current, twist, 0.1)
+        current = current @ motion
+    return status, current
+
+
+def test_dominant_normal_finds_the_plane_and_its_share():
+    rng = np.random.default_rng(1)
+    up = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])
+    plane = up + rng.normal(scale=0.02, size=(800, 3))
+    other = rng.normal(size=(200, 3))
+    normals = np.vstack([plane, other])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    axis, share = dominant_normal(normals, math.radians(20))
+    assert math.degrees(math.acos(min(1.0, axis @ up))) < 1.0  # measured 0.1 degree
+    # 800 plane normals and the few of the 200 others that fall in the cone (3 % of them)
+    assert share == pytest.approx(0.8 + 0.2 * (1 - math.cos(math.radians(20))) / 2, abs=0.01)
+
+
+def test_plane_turn_sees_the_turn_about_the_table_normal(scene, desired):
+    """20 degrees about the optical axis (the table's normal): the table fills the EGI and
+    Algorithm 1's step does not see that turn (clouds downsampled to half a voxel); the
+    plane turn adds a full step (max_rotation_step) in the right direction."""
+    current = camera_pose((0.03, -0.02, 0.01), (2.0, -1.0, 20.0))
+    true_z = math.degrees(rotation_vector((np.linalg.inv(current) @ desired)[:3, :3])[2])
+    assert true_z == pytest.approx(-20.0, abs=0.1)
+    estimated_z = {}
+    for plane_turn in (False, True):
+        params = ServoParams(plane_turn=plane_turn, downsample_size=0.0075)
+        servo = SpectralServo(view(scene, desired), params)
+        assert servo.has_plane_turn == plane_turn
+        record = servo.step_record(view(scene, current))[2]
+        estimated_z[plane_turn] = math.degrees(rotation_vector(record.T_current_desired[:3, :3])[2])
+        if plane_turn:
+            # The step is capped: 0.05 rad about the table normal, (0, 0, -1) in the camera.
+            assert abs(record.plane_turn) == pytest.approx(0.05, abs=1e-9)
+            assert servo.last_turn == record.plane_turn
+    assert abs(estimated_z[False]) < 0.5  # measured 0.04 degree
+    assert -3.5 < estimated_z[True] < -2.5  # measured -2.9 degrees
+
+
+def test_plane_turn_brings_back_a_turn_about_the_table_normal(scene, desired):
+    """From 30 degrees about the table's normal the servo converges with the plane turn
+    and stalls without it (the cause of two failed moderate starts in the simulation)."""
+    current = camera_pose((0.03, -0.02, 0.01), (2.0, -1.0, 30.0))
+    params = ServoParams()
+    status, final = _loop(SpectralServo(view(scene, desired), params), scene, current, desired, 80)
+    assert status is not None and status.state == "converged", status
+    t_mm, r_deg = errors_mm_deg(final, desired)
+    assert t_mm < 3.0  # measured 0.8 mm
+    assert r_deg < 0.3  # measured 0.01 degree
+    params = ServoParams(plane_turn=False)
+    status, final = _loop(SpectralServo(view(scene, desired), params), scene, current, desired, 80)
+    assert status is not None and status.state == "running"
+    assert errors_mm_deg(final, desired)[1] > 15.0  # measured 24 degrees left
+
+
+def test_no_plane_turn_without_a_dominant_plane():
+    """A sphere's normals spread evenly: no dominant plane, no turn."""
+    rng = np.random.default_rng(2)
+    normals = rng.normal(size=(3000, 3))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    points = 0.2 * normals + [0.0, 0.0, 0.8]
+    servo = SpectralServo(svs.PointCloud(points, normals), ServoParams())
+    assert not servo.has_plane_turn
+    assert servo.last_turn == 0.0
 
 
 def test_warm_start_begins_at_the_previous_estimate(scene, desired):
@@ -339,6 +418,29 @@ def test_watchdog_stops_on_a_teleported_cloud(scene, desired):
     assert len(log.records) == 6 and len(robot.sent) == 5 and robot.stops == 1
     assert np.all(log.records[-1].twist == 0)
     assert "mm" in log.status.message
+
+
+def test_tracking_bound_near_the_goal_and_full_search_after_a_jump(scene, desired):
+    """Once locked on, near the previous estimate, the registration seeks only
+    tracking_translation; a camera moved 0.25 m behind the kinematics' back gives a poor
+    bounded fit, the full search redoes the step and the watchdog stops the servo."""
+    servo = SpectralServo(view(scene, desired))
+    current = camera_pose((0.01, -0.01, 0.005), (0.5, -0.5, 0.5))
+    records = [servo.step_record(view(scene, current), np.eye(4))[2] for _ in range(3)]
+    assert [record.tracking for record in records] == [False, True, True]
+    assert all(record.fitness > 0.9 for record in records)
+    # The bounded search finds the pose the full one finds (measured 0.27 mm apart: the
+    # grids lie differently).
+    full = SpectralServo(view(scene, desired)).step_record(view(scene, current))[2]
+    assert errors_mm_deg(records[2].T_current_desired, full.T_current_desired)[0] < 1.0
+    jump = np.eye(4)
+    jump[:3, 3] = (0.25, 0.0, 0.0)
+    twist, status, record = servo.step_record(view(scene, current @ jump), np.eye(4))
+    assert not record.tracking
+    assert status.reason == "jump" and not twist.any()
+    tracking_off = SpectralServo(view(scene, desired), ServoParams(tracking_translation=0.0))
+    for _ in range(2):
+        assert not tracking_off.step_record(view(scene, current), np.eye(4))[2].tracking
 
 
 def test_watchdog_is_armed_only_after_lock_on(scene, desired):
