@@ -6,28 +6,37 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 namespace spectral_vs::detail {
 
 namespace {
 
-std::uint64_t cell_key(const Eigen::Array3i& c) {
-  const Eigen::Array3i k = (c + (1 << 20)).max(0).min((1 << 21) - 1);
-  return (std::uint64_t(k.x()) << 42) | (std::uint64_t(k.y()) << 21) | std::uint64_t(k.z());
-}
-
-// The scene points near the model, in cells of max_distance: a point's nearest neighbour
-// within that distance is in its own cell or one of the 26 around it.
+// The scene points near the model, sorted into a dense grid of cells at least
+// max_distance wide (compressed rows: per cell, a range of point indices): a point's
+// nearest neighbour within that distance is in its own cell or one of the 26 around it.
 class NeighbourGrid {
  public:
-  NeighbourGrid(const PointCloud& scene, const Eigen::AlignedBox3d& around, double cell)
-      : scene_(scene), cell_(cell) {
+  NeighbourGrid(const PointCloud& scene, const Eigen::AlignedBox3d& around, double max_distance)
+      : scene_(scene) {
+    constexpr double kMaxCells = 4194304.0;  // 2^22: 16 MB of offsets at most
+    const Eigen::Vector3d extent = around.sizes();
+    cell_ = std::max(max_distance, std::cbrt(extent.prod() / kMaxCells));
+    origin_ = around.min();
+    dims_ = ((extent / cell_).array().floor() + 1.0).cast<int>();
+    std::vector<std::pair<std::int64_t, Eigen::Index>> keyed;
     for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
       const Eigen::Vector3d p = scene.points().row(i).transpose();
-      if (around.contains(p)) cells_[cell_key(cell_of(p))].push_back(i);
+      if (around.contains(p)) keyed.emplace_back(linear(cell_of(p)), i);
     }
+    std::sort(keyed.begin(), keyed.end());
+    start_.assign(std::size_t(dims_.prod()) + 1, 0);
+    rows_.reserve(keyed.size());
+    for (const auto& [cell, row] : keyed) {
+      ++start_[std::size_t(cell) + 1];
+      rows_.push_back(row);
+    }
+    for (std::size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
   }
 
   // The nearest scene point within `max_distance` of p whose normal has a cosine of at
@@ -40,9 +49,11 @@ class NeighbourGrid {
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = cells_.find(cell_key(c + Eigen::Array3i(dx, dy, dz)));
-          if (it == cells_.end()) continue;
-          for (const Eigen::Index i : it->second) {
+          const Eigen::Array3i neighbour = c + Eigen::Array3i(dx, dy, dz);
+          if ((neighbour < 0).any() || (neighbour >= dims_).any()) continue;
+          const std::int64_t cell = linear(neighbour);
+          for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
+            const Eigen::Index i = rows_[k];
             const double squared = (scene_.points().row(i).transpose() - p).squaredNorm();
             if (squared < best_squared && scene_.normals().row(i).dot(n) >= min_cosine) {
               best_squared = squared;
@@ -55,12 +66,20 @@ class NeighbourGrid {
 
  private:
   Eigen::Array3i cell_of(const Eigen::Vector3d& p) const {
-    return (p.array() / cell_).floor().cast<int>();
+    // Clamped into [-1, dims]: a point outside the box has no neighbours in it beyond.
+    const Eigen::Array3d v = ((p - origin_) / cell_).array().floor();
+    return v.max(-1.0).min(dims_.cast<double>()).cast<int>();
+  }
+  std::int64_t linear(const Eigen::Array3i& c) const {
+    return (std::int64_t(c.x()) * dims_.y() + c.y()) * dims_.z() + c.z();
   }
 
   const PointCloud& scene_;
-  double cell_;
-  std::unordered_map<std::uint64_t, std::vector<Eigen::Index>> cells_;
+  double cell_ = 0.0;
+  Eigen::Vector3d origin_;
+  Eigen::Array3i dims_;
+  std::vector<std::size_t> start_;  // per cell, where its rows begin in rows_
+  std::vector<Eigen::Index> rows_;
 };
 
 }  // namespace
