@@ -248,5 +248,15 @@ TEST_F(IcpOnAResampledCopy, FarFromTheSceneThePoseIsReturnedUnchanged) {
   EXPECT_TRUE(outcome.T_scene_model.isApprox(away));
 }
 
+TEST(Icp, AFlatModelKilometresWideNeedsNoHugeGrid) {
+  // A 2 km x 2 km sheet at 8 mm pairs would be 6e10 cells: the cells grow instead.
+  const PointCloud sheet = patch(0.0, 0.0, 0.0, 1000.0, 50.0, Eigen::Vector3d::UnitZ());
+  Transform nudged = Transform::Identity();
+  nudged(2, 3) = 0.004;
+  const IcpOutcome outcome = refine_point_to_plane(sheet, sheet, nudged, IcpSettings{});
+  EXPECT_GT(outcome.iterations, 0);
+  EXPECT_NEAR(outcome.T_scene_model(2, 3), 0.0, 1e-6);  // back onto the plane
+}
+
 }  // namespace
 }  // namespace spectral_vs::detail

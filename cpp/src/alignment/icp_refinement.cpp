@@ -19,11 +19,14 @@ class NeighbourGrid {
  public:
   NeighbourGrid(const PointCloud& scene, const Eigen::AlignedBox3d& around, double max_distance)
       : scene_(scene) {
-    constexpr double kMaxCells = 4194304.0;  // 2^22: 16 MB of offsets at most
-    const Eigen::Vector3d extent = around.sizes();
-    cell_ = std::max(max_distance, std::cbrt(extent.prod() / kMaxCells));
+    constexpr double kMaxCells = 4194304.0;  // 2^22: 32 MB of offsets at most
+    const Eigen::Array3d extent = around.sizes().array();
+    cell_ = max_distance;
     origin_ = around.min();
-    dims_ = ((extent / cell_).array().floor() + 1.0).cast<int>();
+    // Coarser cells for a large model (a flat one too): still at least max_distance wide.
+    // Counted in double, so that no count overflows an int before it is checked.
+    while (((extent / cell_).floor() + 1.0).prod() > kMaxCells) cell_ *= 1.25;
+    dims_ = ((extent / cell_).floor() + 1.0).cast<int>();
     std::vector<std::pair<std::int64_t, Eigen::Index>> keyed;
     for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
       const Eigen::Vector3d p = scene.points().row(i).transpose();
