@@ -1,5 +1,6 @@
 #include "alignment/fitness_map.hpp"
 
+#include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
 
 #include <algorithm>
@@ -8,70 +9,8 @@
 
 namespace spectral_vs::detail {
 
-namespace {
-
-// The 26 directions to the neighbours of a voxel and the 50-degree cone of SceneMap
-// (scene_map.cpp): the same table, order and arithmetic, so the same fitness.
-const std::array<Eigen::Vector3d, 26>& directions() {
-  static const std::array<Eigen::Vector3d, 26> table = [] {
-    std::array<Eigen::Vector3d, 26> d;
-    int n = 0;
-    for (int x = -1; x <= 1; ++x)
-      for (int y = -1; y <= 1; ++y)
-        for (int z = -1; z <= 1; ++z) {
-          if (x || y || z) d[n++] = Eigen::Vector3d(x, y, z).normalized();
-        }
-    return d;
-  }();
-  return table;
-}
-
-constexpr double kCone = 0.6428;  // cos(50 degrees)
-
-// The nearest direction (the first of equals) and, in `mask`, every direction within the
-// cone together with the nearest.
-int nearest_direction(const Eigen::Vector3d& normal, std::uint32_t* mask = nullptr) {
-  const auto& table = directions();
-  int best = 0;
-  double best_dot = -2.0;
-  std::uint32_t within = 0;
-  for (int i = 0; i < 26; ++i) {
-    const double dot = table[std::size_t(i)].dot(normal);
-    if (dot > best_dot) {
-      best_dot = dot;
-      best = i;
-    }
-    if (dot > kCone) within |= 1u << i;
-  }
-  if (mask) *mask = within | (1u << best);
-  return best;
-}
-
-int voxels_along(double length, double voxel_size, const GridLimits& limits) {
-  const double n = std::ceil(length / voxel_size);
-  const double limit = std::min(double(limits.max_voxels), double(kMaxGridIndex) / 2);
-  if (!(n <= limit)) {
-    fail("voxel_size: ", length, " m is ", n, " voxels of ", voxel_size,
-         " m along an axis, over the limit of ", limit, " voxels (max_voxels)");
-  }
-  return static_cast<int>(n);
-}
-
-}  // namespace
-
 GridSpec FitnessMap::spec_of(const PointCloud& scene, double voxel_size, const GridLimits& limits) {
-  const Eigen::AlignedBox3d box = bounding_box(scene);
-  GridSpec spec;
-  spec.resolution = voxel_size;
-  spec.origin = ((box.min() / voxel_size).array().floor() - 2.0).matrix() * voxel_size;
-  for (int axis = 0; axis < 3; ++axis) {
-    spec.dims[axis] = voxels_along(box.max()[axis] - spec.origin[axis], voxel_size, limits) + 3;
-  }
-  if (spec.voxel_count() > limits.max_voxels) {
-    fail("voxel_size: the scene spans ", spec.dims.transpose(), " voxels at ", voxel_size,
-         " m, which exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
-  }
-  return spec;
+  return scene_map_spec(scene, voxel_size, limits);
 }
 
 double FitnessMap::fitness(const PointCloud& scene, const GridSpec& spec, const Points& points,
@@ -113,7 +52,7 @@ double FitnessMap::fitness(const PointCloud& scene, const GridSpec& spec, const 
       const Eigen::Array3i v = spec.index_of(scene_points.row(i).transpose()).array();
       if ((v < low).any() || (v > high).any()) continue;
       std::uint32_t mask = 0;
-      nearest_direction(scene_normals.row(i).transpose(), &mask);
+      normal_direction(scene_normals.row(i).transpose(), &mask);
       scene_[local(v)] |= mask;
     }
     // Each model voxel: supported when one of its points' nearest direction is among
@@ -133,7 +72,7 @@ double FitnessMap::fitness(const PointCloud& scene, const GridSpec& spec, const 
         state = 1;
         ++voxels;
       }
-      if (state == 1 && ((near_[k] >> nearest_direction(normals.row(i).transpose())) & 1u)) {
+      if (state == 1 && ((near_[k] >> normal_direction(normals.row(i).transpose())) & 1u)) {
         state = 2;
         ++supported;
       }

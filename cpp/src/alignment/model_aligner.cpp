@@ -7,6 +7,7 @@
 #include "alignment/align_detail.hpp"
 #include "alignment/fitness_map.hpp"
 #include "alignment/range_image.hpp"
+#include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
 
 #include <algorithm>
@@ -24,41 +25,6 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-// ceil(length / voxel_size), refused over the limit: the rule of the aligner's grids.
-int voxels_along(double length, double voxel_size, const GridLimits& limits) {
-  const double n = std::ceil(length / voxel_size);
-  const double limit = std::min(double(limits.max_voxels), double(kMaxGridIndex) / 2);
-  if (!(n <= limit)) {
-    fail("voxel_size: ", length, " m is ", n, " voxels of ", voxel_size,
-         " m along an axis, over the limit of ", limit, " voxels (max_voxels)");
-  }
-  return static_cast<int>(n);
-}
-
-// The bounded translation grid of align() (AlignParams::max_translation): the scene's box
-// and the model's where it starts, max_translation of room past them (once: the grid is
-// circular), a voxel of margin, FFT-friendly sizes. The same spec as align()'s
-// (SceneTranslation's bounded constructor), so the same poses.
-GridSpec bounded_spec(const Eigen::AlignedBox3d& scene_box, const Eigen::AlignedBox3d& model_box,
-                      double max_translation, double voxel_size, const GridLimits& limits) {
-  Eigen::AlignedBox3d cover = scene_box;
-  cover.extend(model_box);
-  cover.max().array() += max_translation;
-  const int shifts = 2 * voxels_along(max_translation, voxel_size, limits) + 2;
-  GridSpec spec;
-  spec.resolution = voxel_size;
-  spec.origin = ((cover.min() / voxel_size).array().floor() - 1.0).matrix() * voxel_size;
-  for (int axis = 0; axis < 3; ++axis) {
-    const int needed = voxels_along(cover.max()[axis] - spec.origin[axis], voxel_size, limits) + 2;
-    spec.dims[axis] = fft_friendly_size(std::max(shifts, needed));
-  }
-  if (spec.voxel_count() > limits.max_voxels) {
-    fail("voxel_size: a translation grid of ", spec.dims.transpose(), " voxels at ", voxel_size,
-         " m exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
-  }
-  return spec;
 }
 
 // The model's pose as a rotation about its centroid c and a translation of it:
@@ -124,8 +90,8 @@ struct ModelAligner::Impl {
     const Points& at_start = move(start);
     const Eigen::AlignedBox3d model_box(at_start.colwise().minCoeff().transpose(),
                                         at_start.colwise().maxCoeff().transpose());
-    const GridSpec spec = bounded_spec(bounding_box(scene), model_box, params.max_translation,
-                                       params.voxel_size, params.limits);
+    const GridSpec spec = detail::bounded_translation_spec(
+        bounding_box(scene), model_box, params.max_translation, params.voxel_size, params.limits);
     if (!phase || phase->spec().dims != spec.dims) {
       PhaseCorrelationParams p;
       p.subvoxel = params.subvoxel;
@@ -229,7 +195,7 @@ ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
   im.model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
   if (im.local()) {
     im.max_shift = Eigen::Vector3i::Constant(
-        voxels_along(params.max_translation, params.voxel_size, params.limits));
+        detail::voxels_along(params.max_translation, params.voxel_size, params.limits));
   }
 }
 

@@ -49,32 +49,23 @@ const std::array<Eigen::Vector3d, 26>& directions() {
   return table;
 }
 
-int nearest_direction(const Eigen::Vector3d& normal) {
+}  // namespace
+
+int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone) {
   int best = 0;
   double best_dot = -2.0;
+  std::uint32_t within = 0;
   for (int i = 0; i < 26; ++i) {
-    const double dot = directions()[i].dot(normal);
+    const double dot = directions()[std::size_t(i)].dot(normal);
     if (dot > best_dot) {
       best_dot = dot;
       best = i;
     }
+    if (dot > 0.6428) within |= 1u << i;  // cos(50 degrees)
   }
+  if (cone) *cone = within | (1u << best);
   return best;
 }
-
-// The directions within 50 degrees of `normal`: with the 35-45 degree spacing of the
-// table, a model normal within about 30 degrees always finds its nearest direction set.
-std::uint32_t direction_mask(const Eigen::Vector3d& normal) {
-  std::uint32_t mask = 0;
-  for (int i = 0; i < 26; ++i) {
-    if (directions()[i].dot(normal) > 0.6428) mask |= 1u << i;
-  }
-  return mask | (1u << nearest_direction(normal));
-}
-
-}  // namespace
-
-namespace {
 
 // ceil(length / voxel_size) as an int, refused over the limit before the conversion,
 // which is undefined beyond the range of int (a scene two million metres wide at 0.1 mm).
@@ -88,25 +79,29 @@ int voxels_along(double length, double voxel_size, const GridLimits& limits) {
   return static_cast<int>(n);
 }
 
-}  // namespace
+GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const GridLimits& limits) {
+  const Eigen::AlignedBox3d box = bounding_box(evidence);
+  GridSpec spec;
+  spec.resolution = voxel_size;
+  spec.origin = ((box.min() / voxel_size).array().floor() - 2.0).matrix() * voxel_size;
+  for (int axis = 0; axis < 3; ++axis) {
+    spec.dims[axis] = voxels_along(box.max()[axis] - spec.origin[axis], voxel_size, limits) + 3;
+  }
+  if (spec.voxel_count() > limits.max_voxels) {
+    fail("voxel_size: the scene spans ", spec.dims.transpose(), " voxels at ", voxel_size,
+         " m, which exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
+  }
+  return spec;
+}
 
 SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
                    const GridLimits& limits)
-    : scene_(&scene) {
-  const Eigen::AlignedBox3d box = bounding_box(evidence);
-  spec_.resolution = voxel_size;
-  spec_.origin = ((box.min() / voxel_size).array().floor() - 2.0).matrix() * voxel_size;
-  for (int axis = 0; axis < 3; ++axis) {
-    spec_.dims[axis] = voxels_along(box.max()[axis] - spec_.origin[axis], voxel_size, limits) + 3;
-  }
-  if (spec_.voxel_count() > limits.max_voxels) {
-    fail("voxel_size: the scene spans ", spec_.dims.transpose(), " voxels at ", voxel_size,
-         " m, which exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
-  }
+    : scene_(&scene), spec_(scene_map_spec(evidence, voxel_size, limits)) {
   near_.assign(spec_.voxel_count(), 0);
   for (Eigen::Index i = 0; i < evidence.points().rows(); ++i) {
     const Eigen::Vector3i v = spec_.index_of(evidence.points().row(i).transpose());
-    const std::uint32_t mask = direction_mask(evidence.normals().row(i).transpose());
+    std::uint32_t mask = 0;
+    normal_direction(evidence.normals().row(i).transpose(), &mask);
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dz = -1; dz <= 1; ++dz)
@@ -123,7 +118,7 @@ double SceneMap::fitness(const Points& points, const Points& normals) const {
     const Eigen::Array3i c = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
     const std::uint64_t key =
         (std::uint64_t(c.x()) << 42) | (std::uint64_t(c.y()) << 21) | std::uint64_t(c.z());
-    seen_.emplace_back(key, nearest_direction(normals.row(i).transpose()));
+    seen_.emplace_back(key, normal_direction(normals.row(i).transpose()));
   }
   std::sort(seen_.begin(), seen_.end());
   std::size_t voxels = 0, supported = 0;
@@ -258,9 +253,12 @@ GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double 
   return covering_spec(cover, minimum.dims, voxel_size, limits);
 }
 
-GridSpec bounded_scene_spec(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
-                            double max_translation, double voxel_size, const GridLimits& limits) {
-  Eigen::AlignedBox3d cover = bounding_box(scene.cloud());
+}  // namespace
+
+GridSpec bounded_translation_spec(const Eigen::AlignedBox3d& scene_box,
+                                  const Eigen::AlignedBox3d& model_box, double max_translation,
+                                  double voxel_size, const GridLimits& limits) {
+  Eigen::AlignedBox3d cover = scene_box;
   cover.extend(model_box);
   // The grid is circular: max_translation of room once, past the far side, keeps every
   // shift of up to max_translation either way from wrapping one cloud onto the other.
@@ -268,8 +266,6 @@ GridSpec bounded_scene_spec(const SceneMap& scene, const Eigen::AlignedBox3d& mo
   const int shifts = 2 * voxels_along(max_translation, voxel_size, limits) + 2;
   return covering_spec(cover, Eigen::Vector3i::Constant(shifts), voxel_size, limits);
 }
-
-}  // namespace
 
 SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start,
                                    double reach, double voxel_size, Occupancy occupancy,
@@ -281,7 +277,8 @@ SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::AlignedBo
                                    double max_translation, double voxel_size, Occupancy occupancy,
                                    const PhaseCorrelationParams& params, const GridLimits& limits)
     : SceneTranslation(scene,
-                       bounded_scene_spec(scene, model_box, max_translation, voxel_size, limits),
+                       bounded_translation_spec(bounding_box(scene.cloud()), model_box,
+                                                max_translation, voxel_size, limits),
                        Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits)),
                        occupancy, params, limits) {}
 

@@ -13,6 +13,27 @@
 
 namespace spectral_vs::detail {
 
+/// ceil(length / voxel_size), the aligner's rule for the voxels of its grids.
+/// @throws std::invalid_argument (naming max_voxels) over the limit, before any overflow.
+int voxels_along(double length, double voxel_size, const GridLimits& limits);
+
+/// The nearest of the 26 directions to a voxel's neighbours (about 35-45 degrees apart)
+/// to `normal`, the first of equals; in `cone`, if given, every direction within 50
+/// degrees of it together with the nearest.
+int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullptr);
+
+/// The grid of SceneMap over `evidence`: its box and two voxels on each side.
+/// @throws std::invalid_argument over limits.max_voxels.
+GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const GridLimits& limits);
+
+/// The bounded translation grid (AlignParams::max_translation): the scene's box and the
+/// model's where it starts, max_translation of room past them (once: the grid is
+/// circular), a voxel of margin, FFT-friendly sizes. @throws std::invalid_argument over
+/// limits.max_voxels.
+GridSpec bounded_translation_spec(const Eigen::AlignedBox3d& scene_box,
+                                  const Eigen::AlignedBox3d& model_box, double max_translation,
+                                  double voxel_size, const GridLimits& limits);
+
 /// For each voxel of the scene's box, the directions of the normals of the scene points
 /// within one voxel of it (a mask over 26 directions), for the fitness of a pose; and
 /// the scene points near a place, for windows.
