@@ -49,7 +49,7 @@ initial_guess : ndarray (4, 4)
 global_search : bool
     Start from the best rotations of the SO(3) search (default True).
 hypotheses : int
-    Rotations of the global search that are refined and verified (default 32); half as
+    Rotations of the global search that are placed and verified (default 48); half as
     many per part of a cluttered scene.
 refinements : int
     The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
@@ -68,23 +68,27 @@ max_translation : float
 scene_viewpoint : ndarray (3,) or None
     Sensor origin of a single-view scene, metres: fitness then checks the pose against
     what the view saw (the model rendered from there, pixel by pixel against the scan's
-    depth), which tells a pose from its flip (default None: seen from all sides).
+    depth), which tells a pose from its flip; without a support plane the whole view is
+    searched as one part (default None: seen from all sides).
 suppress_support_plane : bool
     With global search: search the scene without its support plane (a plane wider than 4
     model reaches holding over a fifth of the points, e.g. a table; fitness still sees
     it), and where there is one, search each connected part of the scene above it that
-    could be the object on its own EGI (default True).
+    could be the object on its own EGI, its rotations placed from the model's side
+    facing scene_viewpoint by phase correlation in a window around the part, at twice
+    the voxel and then at the voxel (default True).
 polish : bool
-    With global search: after Algorithm 1, a pattern search on the rotation (4 to 1/4
-    degree steps) for the best overlap of the model's voxels with the scene's (default
-    True); skipped for models sampled sparser than 2 points per occupied voxel. For a
-    model whose EGI has a flat axis (a mug's), turns about that axis every 15 degrees are
-    scored first.
+    With global search: after Algorithm 1, for a model whose EGI has a flat axis (a
+    mug's), the turns about that axis every 15 degrees scored by the overlap of the
+    model's voxels with the scene's; without icp_refinement, then a pattern search on the
+    rotation (4 to 1/4 degree steps) for the same overlap (default True). Skipped for
+    models sampled sparser than 2 points per occupied voxel.
 icp_refinement : bool
-    With global search, last: a point-to-plane ICP from the result (pairs within
-    voxel_size whose normals agree within 45 degrees; with scene_viewpoint the model's
-    points facing it only), kept unless it lowers fitness by more than 0.05 (default
-    True). The one step that is not spectral.
+    With global search: a point-to-plane ICP (pairs within voxel_size whose normals agree
+    within 45 degrees; with scene_viewpoint the model's points facing it only), kept
+    unless it lowers fitness by more than 0.05 (default True); with scene_viewpoint on
+    every Algorithm 1 result before they are compared, and last on the kept one. The one
+    step that is not spectral.
 subvoxel : bool
     Sub-voxel refinement of the phase-correlation peak.
 occupancy : str

@@ -174,21 +174,30 @@ def _benchmark_cases():
 
 def test_polish_resolves_the_near_symmetric_mug():
     """The mug's EGI barely sees its handle: the global search alone ends 5-15 degrees
-    off about the mug's axis (docs/experiments.md). The polish on the voxel correlation
-    sees the handle."""
+    off about the mug's axis (docs/experiments.md). Without the ICP, the polish's pattern
+    search on the voxel correlation sees the handle; with it, the polish is the sweep
+    about the mug's axis alone (24 turns) and the ICP ends closer."""
     cases = _benchmark_cases()
 
-    rotation_errors = []
+    rotation_errors = {False: [], True: []}
     for angle in (30.0, 60.0, 120.0, 150.0):
         for index in (0, 5):
             case = cases.make_case(cases.CaseSpec("full", "mug", angle, index))
-            result = svs.align(case.model_cloud(), case.scene_cloud(), polish=True)
-            rotation, translation = cases.pose_error(case, np.asarray(result.T_scene_model))
-            rotation_errors.append(rotation)
-            assert translation < 0.005  # metres
-            assert result.polish_evaluations > 0
-    assert sum(e < 2.0 for e in rotation_errors) >= 6, rotation_errors
-    assert np.median(rotation_errors) < 1.5
+            for icp in (False, True):
+                result = svs.align(
+                    case.model_cloud(), case.scene_cloud(), polish=True, icp_refinement=icp
+                )
+                rotation, translation = cases.pose_error(case, np.asarray(result.T_scene_model))
+                rotation_errors[icp].append(rotation)
+                assert translation < 0.005  # metres
+                if icp:
+                    assert result.polish_evaluations == 24
+                else:
+                    assert result.polish_evaluations > 24
+    for icp, errors in rotation_errors.items():
+        assert sum(e < 2.0 for e in errors) >= 6, (icp, errors)
+        assert np.median(errors) < 1.5, (icp, errors)
+    assert np.median(rotation_errors[True]) < np.median(rotation_errors[False])
 
 
 def test_flat_axis_sweep_finds_the_mug_handle():
@@ -229,12 +238,31 @@ def test_view_fitness_tells_the_pose_from_its_flip():
         assert fitness[1] < fitness[0] - 0.15, (spec.case_id, fitness)
 
 
+def test_single_view_search_tells_near_symmetric_objects_from_their_flips():
+    """A single view without a table is searched as one part: its hypotheses are placed
+    from the model's side facing the sensor, and each refined pose is tightened by the
+    ICP before the view's fitness compares them. The first 10 single-view cases at 60
+    and 150 degrees (not chosen), measured: 20 of 20 within 5 degrees and 10 mm; 17 of
+    20 before (the duck and blob000 ended turned half a turn), 19 of 20 without the
+    ICP."""
+    cases = _benchmark_cases()
+    successes = 0
+    for spec in cases.case_specs(["partial"], [60.0, 150.0], 10):
+        case = cases.make_case(spec)
+        result = svs.align(case.model_cloud(), case.scene_cloud(), scene_viewpoint=case.viewpoint)
+        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
+        successes += rotation_deg < 5.0 and translation_m < 0.010
+        assert result.icp_iterations > 0
+    assert successes >= 18
+
+
 def test_part_search_finds_the_target_in_clutter():
     """In clutter the EGI of the whole scene mixes every object's normals and its best
     rotations are mostly other objects' (36% success before the search per part, in
     docs/experiments.md). Searched per connected part above the table, the target is
-    found: the first 8 clutter cases at 60 and 150 degrees (not chosen), measured 13 of
-    16 within 5 degrees and 10 mm."""
+    found: the first 8 clutter cases at 60 and 150 degrees (not chosen), measured 15 of
+    16 within 5 degrees and 10 mm (13 with half as many hypotheses per part, each placed
+    twice at the alignment's voxel, and no ICP before the ranking)."""
     cases = _benchmark_cases()
     successes = 0
     for spec in cases.case_specs(["clutter"], [60.0, 150.0], 8):
@@ -242,7 +270,7 @@ def test_part_search_finds_the_target_in_clutter():
         result = svs.align(case.model_cloud(), case.scene_cloud(), scene_viewpoint=case.viewpoint)
         rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
         successes += rotation_deg < 5.0 and translation_m < 0.010
-    assert successes >= 11
+    assert successes >= 13
 
 
 def test_icp_refinement_tightens_the_spectral_result():

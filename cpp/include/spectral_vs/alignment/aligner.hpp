@@ -42,7 +42,7 @@ struct AlignParams {
   Transform initial_guess = Transform::Identity();  ///< T_scene_model to start from.
   bool global_search = true;  ///< Start from the best rotations of the SO(3) search
                               ///< (beyond the paper) instead of the initial guess's.
-  int hypotheses = 32;        ///< Rotations of the global search that are refined and verified:
+  int hypotheses = 48;        ///< Rotations of the global search that are placed and verified:
                               ///< enough to hold the true one among the near-equal maxima of
                               ///< an object with symmetric faces. Searched per part of a
                               ///< cluttered scene (see suppress_support_plane): half as many
@@ -64,7 +64,8 @@ struct AlignParams {
                                    ///< of one scene, as in servoing. 0: unbounded (the paper).
   /// The sensor origin of a single-view scene, scene coordinates, metres: fitness then
   /// checks a pose against what the view saw (AlignResult::fitness), which tells a pose
-  /// from its flip. Unset for a scene seen from all sides.
+  /// from its flip. With global search and no support plane, the whole view is searched
+  /// as one part (below). Unset for a scene seen from all sides.
   std::optional<Eigen::Vector3d> scene_viewpoint;
   /// With global search: search the scene without its support plane (a plane of one
   /// normal direction wider than 4 model reaches holding over a fifth of the points, e.g.
@@ -73,23 +74,26 @@ struct AlignParams {
   /// parts (points within 0.75 voxel_size joined), and each part that could be the object
   /// or a view of it (at least 30 points, its box diagonal between a quarter of the
   /// model's reach and 4 reaches; the 8 largest) gets its own SO(3) search on its own EGI,
-  /// its rotations placed by phase correlation in a window around it.
+  /// its rotations placed by phase correlation in a window around it (at twice the voxel,
+  /// then at the voxel), from the model's side facing scene_viewpoint if set.
   bool suppress_support_plane = true;
-  bool polish = true;  ///< With global search: after Algorithm 1, a pattern search on
-                       ///< the rotation (4 to 1/4 degree steps) for the best overlap
-                       ///< of the model's voxels with the scene's, past the EGI's
-                       ///< accuracy floor. Skipped for models sampled sparser than
-                       ///< 2 points per occupied voxel. For a model whose EGI has a
-                       ///< flat axis (its smallest autocorrelation curvature under a
-                       ///< tenth of the largest: a mug's axis, its handle a few
-                       ///< percent of the normals), turns about that axis every 15
-                       ///< degrees are scored by the same overlap first.
-  /// With global search, last: a point-to-plane ICP from the result (each model point
-  /// paired with its nearest scene point within voxel_size whose normal agrees within 45
+  bool polish = true;  ///< With global search: after Algorithm 1, for a model whose EGI
+                       ///< has a flat axis (its smallest autocorrelation curvature
+                       ///< under a tenth of the largest: a mug's axis, its handle a
+                       ///< few percent of the normals), the turns about that axis every
+                       ///< 15 degrees, scored by the overlap of the model's voxels with
+                       ///< the scene's. Without icp_refinement, then a pattern search on
+                       ///< the rotation (4 to 1/4 degree steps) for the same overlap,
+                       ///< past the EGI's accuracy floor. Skipped for models sampled
+                       ///< sparser than 2 points per occupied voxel.
+  /// With global search: a point-to-plane ICP from the result (each model point paired
+  /// with its nearest scene point within voxel_size whose normal agrees within 45
   /// degrees; with scene_viewpoint, the model points facing it only; Gauss-Newton, up to
-  /// 30 steps), kept unless it lowers fitness by more than 0.05. Not spectral: the one
-  /// local step, past the voxel grid's and the EGI's accuracy (docs/experiments.md
-  /// measures with and without).
+  /// 30 steps), kept unless it lowers fitness by more than 0.05. With scene_viewpoint it
+  /// refines every Algorithm 1 result before they are compared (a view's fitness tells
+  /// a pose from its near-symmetric flip only when both are precise), and the kept one
+  /// after the polish. Not spectral: the one local step, past the voxel grid's and the
+  /// EGI's accuracy (docs/experiments.md measures with and without).
   bool icp_refinement = true;
   bool subvoxel = true;  ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;    ///< Voxel values (the paper: binary).
