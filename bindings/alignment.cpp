@@ -41,6 +41,10 @@ max_rotation_step : float
 tolerance : float
     eps_g of eq. (17): |translation step| (voxels) + |grad C| below which it stops.
 max_iterations : int
+    Iterations of Algorithm 1 in the paper's mode (default 100).
+refinement_iterations : int
+    With global search: iterations of Algorithm 1 per refinement (default 20); each
+    refined pose is then polished and ICP-refined.
 max_seconds : float
     Time budget of the whole alignment, seconds (default 0: none). Past it, the best pose
     so far is returned with ``converged = False`` and ``stop_reason = 'max_seconds'``.
@@ -119,6 +123,7 @@ max_voxels : int
       .def_readwrite("max_rotation_step", &AlignParams::max_rotation_step)
       .def_readwrite("tolerance", &AlignParams::tolerance)
       .def_readwrite("max_iterations", &AlignParams::max_iterations)
+      .def_readwrite("refinement_iterations", &AlignParams::refinement_iterations)
       .def_readwrite("max_seconds", &AlignParams::max_seconds)
       .def_property(
           "initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },

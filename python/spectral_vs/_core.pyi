@@ -306,6 +306,7 @@ class AlignParams:
     max_rotation_step: float  # radians
     tolerance: float
     max_iterations: int
+    refinement_iterations: int
     max_seconds: float  # seconds, 0: no limit
     @property
     def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model

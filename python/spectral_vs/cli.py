@@ -208,6 +208,8 @@ def run_align(args: argparse.Namespace) -> int:
         settings.hypotheses = args.hypotheses
     if args.max_iterations is not None:
         settings.max_iterations = args.max_iterations
+    if args.refinement_iterations is not None:
+        settings.refinement_iterations = args.refinement_iterations
     if initial is not None:
         settings.initial_guess = initial
 
@@ -796,14 +798,22 @@ def build_parser() -> argparse.ArgumentParser:
         "--hypotheses",
         type=_positive_int,
         metavar="N",
-        help="rotations of the global search that are refined and verified "
+        help="rotations of the global search that are placed and verified "
         f"(default: {svs.AlignParams().hypotheses})",
     )
     settings.add_argument(
         "--max-iterations",
         type=_positive_int,
         metavar="N",
-        help=f"iterations of Algorithm 1 (default: {svs.AlignParams().max_iterations})",
+        help="iterations of Algorithm 1 in the paper's mode "
+        f"(default: {svs.AlignParams().max_iterations})",
+    )
+    settings.add_argument(
+        "--refinement-iterations",
+        type=_positive_int,
+        metavar="N",
+        help="with global search: iterations of Algorithm 1 per refined hypothesis "
+        f"(default: {svs.AlignParams().refinement_iterations})",
     )
     settings.add_argument(
         "--threads",

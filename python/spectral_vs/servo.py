@@ -375,6 +375,7 @@ class ServoParams:
         else:
             params.global_search = self.global_search
             params.max_iterations = self.max_iterations
+            params.refinement_iterations = self.max_iterations  # the global search's runs
         for name, value in self.align_overrides.items():
             if not hasattr(params, name) or name.startswith("_"):
                 raise ValueError(f"unknown alignment setting {name!r} in align_overrides")

@@ -162,6 +162,20 @@ def test_bad_search_settings_name_the_setting():
         svs.align(model, scene, search_voxel_size=-0.01, downsample=False)
     with pytest.raises(ValueError, match="window_margin must be >= 0"):
         svs.align(model, scene, window_margin=float("nan"), downsample=False)
+    with pytest.raises(ValueError, match="refinement_iterations must be >= 1, got 0"):
+        svs.align(model, scene, refinement_iterations=0, downsample=False)
+
+
+def test_refinements_stop_at_their_iterations():
+    """With global search each refinement runs at most refinement_iterations of
+    Algorithm 1 (max_iterations is the paper's mode's); a run cut short says so."""
+    rng = np.random.default_rng(14)
+    model, scene, _, _ = make_case(rng, 10)
+    result = svs.align(model, scene, refinement_iterations=2, max_iterations=50, tolerance=1e-9)
+    assert result.iterations == 2 and len(result.history) == 2
+    assert not result.converged and result.stop_reason == "max_iterations"
+    paper = svs.align(model, scene, global_search=False, max_iterations=3, tolerance=1e-9)
+    assert paper.iterations == 3
 
 
 def _benchmark_cases():

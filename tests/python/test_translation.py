@@ -97,3 +97,42 @@ def test_max_shift_bounds_the_search():
     assert np.allclose(free.shift_voxels, [6, 0, 0], atol=0.5)
     assert np.all(np.abs(bounded.peak_voxels) <= 3)
     np.testing.assert_array_equal(wide.shift_voxels, free.shift_voxels)
+
+
+def _numpy_phase_correlation(moving: np.ndarray, target: np.ndarray):
+    """The normalised correlation surface of eq. (7) by numpy's FFT: bins whose cross power
+    is under 1e-6 of the DC bin's carry no phase; each kept bin of the full spectrum
+    counts once in the normalisation."""
+    cross = np.fft.fftn(target) * np.conj(np.fft.fftn(moving))
+    power = np.abs(cross)
+    kept = power > power.flat[0] * 1e-6
+    surface = np.fft.ifftn(np.where(kept, cross / np.where(kept, power, 1.0), 0.0)).real
+    return surface * surface.size / kept.sum()
+
+
+def test_bounded_search_matches_numpy_on_the_feasible_shifts():
+    """The inverse transform is computed only at feasible shifts (the bound, and shifts
+    that overlap the two occupied boxes); the peak there is numpy's over the same set."""
+    rng = np.random.default_rng(21)
+    dims = (36, 32, 40)
+    spec = svs.GridSpec(origin=(0.0, 0.0, 0.0), resolution=0.01, dims=dims)
+    for trial in range(6):
+        points = rng.uniform(0.08, 0.2, size=(300, 3))
+        shift = rng.integers(-6, 7, size=3)
+        target_points = points + 0.01 * shift + rng.normal(0.0, 0.004, size=points.shape)
+        moving = svs.voxelize(svs.PointCloud(points), spec, occupancy="binary")
+        target = svs.voxelize(svs.PointCloud(target_points), spec, occupancy="binary")
+        surface = _numpy_phase_correlation(moving.values, target.values)
+        correlation = svs.PhaseCorrelation(spec, subvoxel=False)
+        correlation.set_target(target)
+        for bound in (2, 5, 40):
+            lo = np.maximum(target.occupied_min - moving.occupied_max, -bound)
+            hi = np.minimum(target.occupied_max - moving.occupied_min, bound)
+            ranges = [np.arange(a, b + 1) for a, b in zip(lo, hi, strict=True)]
+            grid = np.meshgrid(*ranges, indexing="ij")
+            shifts = np.stack([g.ravel() for g in grid], axis=1)
+            values = surface[tuple((shifts % np.asarray(dims)).T)]
+            best = shifts[np.argmax(values)]
+            estimate = correlation.estimate(moving, max_shift=(bound, bound, bound))
+            np.testing.assert_array_equal(estimate.peak_voxels, best, err_msg=f"{trial} {bound}")
+            assert estimate.peak == pytest.approx(values.max(), abs=1e-4)

@@ -59,6 +59,9 @@ void check_params(const AlignParams& p) {
   detail::require_positive_finite(p.max_rotation_step, "max_rotation_step");
   detail::require_positive_finite(p.tolerance, "tolerance");
   if (p.max_iterations < 1) fail("max_iterations must be >= 1, got ", p.max_iterations);
+  if (p.refinement_iterations < 1) {
+    fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
+  }
   if (p.hypotheses < 1) fail("hypotheses must be >= 1, got ", p.hypotheses);
   if (p.refinements < 1 || p.refinements > p.hypotheses) {
     fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
@@ -230,18 +233,18 @@ void place_window(const Problem& problem, std::optional<TranslationWindow>& wind
                  problem.params.limits);
 }
 
-// Algorithm 1 (eq. 16-17) from `pose` until the stop rule or max_iterations. The
+// Algorithm 1 (eq. 16-17) from `pose` until the stop rule or `max_iterations`. The
 // translation comes from `window`, placed here around the model, or, while given and
 // until the steps fit in a window, from `whole_scene` (the paper's mode).
 AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
                            const ShCoefficients& scene_coefficients, Pose pose,
-                           std::optional<TranslationWindow>& window,
-                           SceneTranslation* whole_scene) {
+                           std::optional<TranslationWindow>& window, SceneTranslation* whole_scene,
+                           int max_iterations) {
   const AlignParams& params = problem.params;
   const bool newton = params.rotation_step == RotationStep::newton;
   if (!whole_scene) place_window(problem, window, problem.model.centre(pose));
   AlignResult result;
-  for (int iteration = 0; iteration < params.max_iterations; ++iteration) {
+  for (int iteration = 0; iteration < max_iterations; ++iteration) {
     const auto start = std::chrono::steady_clock::now();
     const CorrelationValue c = correlation.evaluate(pose.R, newton);
     pose.R = pose.R * exp_so3(rotation_step(c, params));
@@ -277,7 +280,7 @@ AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
     }
     if (!whole_scene) {
       window->follow(problem.model.centre(pose));
-    } else if (params.max_translation == 0.0 && iteration + 1 < params.max_iterations &&
+    } else if (params.max_translation == 0.0 && iteration + 1 < max_iterations &&
                step.norm() < 0.5 * problem.margin) {
       place_window(problem, window, problem.model.centre(pose));  // near: go local
       whole_scene = nullptr;
@@ -564,8 +567,8 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   }
   So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
   const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
-  AlignResult result =
-      run_algorithm1(problem, correlation, coefficients, hypothesis.pose, window, nullptr);
+  AlignResult result = run_algorithm1(problem, correlation, coefficients, hypothesis.pose, window,
+                                      nullptr, problem.params.refinement_iterations);
   result.hypothesis = hypothesis.index;
   // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
   // walk off a right hypothesis: the fitter of the two poses is kept.
@@ -726,7 +729,8 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
             : SceneTranslation(scene_map, moving.centre(start), moving.reach(), params.voxel_size,
                                params.occupancy, phase_params(params), params.limits);
     std::optional<TranslationWindow> window;
-    return run_algorithm1(problem, correlation, scene_coefficients, start, window, &whole_scene);
+    return run_algorithm1(problem, correlation, scene_coefficients, start, window, &whole_scene,
+                          params.max_iterations);
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis = flat_axis(model_coefficients, params.bandwidth);

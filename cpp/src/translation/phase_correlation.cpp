@@ -115,7 +115,10 @@ struct PhaseCorrelation::Impl {
   FftwBuffer<Complex> partial;
   fftwf_plan z_slab = nullptr, y_slab = nullptr, x_all = nullptr;
   int partial_x0 = 0, partial_x1 = -1;  // slabs of `partial` that may be non-zero
-  fftwf_plan inverse = nullptr;
+  // The inverse in three passes, pruned to the feasible shifts: along x for all, in
+  // place; along y in the x-slabs of feasible shifts; along z (complex to real) in the
+  // rows of feasible x and y shifts. The other voxels of `output` are never read.
+  fftwf_plan x_inverse = nullptr, y_inverse = nullptr, z_inverse = nullptr;
   bool has_target = false;
   Eigen::Vector3i target_min, target_max;
   // The box of `input` that may hold non-zero voxels: only it is cleared and rewritten,
@@ -125,7 +128,7 @@ struct PhaseCorrelation::Impl {
 
   ~Impl() {
     std::lock_guard<std::mutex> lock(planner_mutex());
-    for (fftwf_plan plan : {z_slab, y_slab, x_all, inverse}) {
+    for (fftwf_plan plan : {z_slab, y_slab, x_all, x_inverse, y_inverse, z_inverse}) {
       if (plan) fftwf_destroy_plan(plan);
     }
   }
@@ -159,9 +162,14 @@ struct PhaseCorrelation::Impl {
     x_all = fftwf_plan_guru_dft(1, &along_x, 1, &lines, part,
                                 reinterpret_cast<fftwf_complex*>(spectrum.get()), FFTW_FORWARD,
                                 FFTW_ESTIMATE);
-    inverse = fftwf_plan_dft_c2r_3d(nx, ny, nz, reinterpret_cast<fftwf_complex*>(spectrum.get()),
-                                    output.get(), FFTW_ESTIMATE);
-    if (!z_slab || !y_slab || !x_all || !inverse) {
+    auto* spec_data = reinterpret_cast<fftwf_complex*>(spectrum.get());
+    x_inverse = fftwf_plan_guru_dft(1, &along_x, 1, &lines, spec_data, spec_data, FFTW_BACKWARD,
+                                    FFTW_ESTIMATE);
+    fftwf_plan_with_nthreads(1);
+    y_inverse = fftwf_plan_guru_dft(1, &along_y, 1, &columns, spec_data, spec_data, FFTW_BACKWARD,
+                                    FFTW_ESTIMATE | FFTW_UNALIGNED);
+    z_inverse = fftwf_plan_dft_c2r_1d(nz, spec_data, output.get(), FFTW_ESTIMATE | FFTW_UNALIGNED);
+    if (!z_slab || !y_slab || !x_all || !x_inverse || !y_inverse || !z_inverse) {
       fail("grid: FFTW could not plan a ", spec.dims.transpose(), " transform");
     }
   }
@@ -245,17 +253,45 @@ struct PhaseCorrelation::Impl {
     phase_bins = 2.0 * double(kept) - double(kept_edge);
   }
 
-  // The largest correlation over feasible shifts. Along z the feasible indices form at
-  // most two runs; each run's maximum is a vectorised reduction, and the index is
-  // searched only in a run that beats the best so far.
-  Eigen::Vector3i find_peak(const VoxelGrid& moving, const Eigen::Vector3i& max_shift,
-                            float& height) const {
-    std::vector<int> shifts[3];
+  // Per axis, the shift each circular index stands for (INT_MIN where infeasible).
+  struct FeasibleShifts {
+    std::vector<int> along[3];
+  };
+
+  FeasibleShifts feasible_shifts(const VoxelGrid& moving, const Eigen::Vector3i& max_shift) const {
+    FeasibleShifts feasible;
     for (int axis = 0; axis < 3; ++axis) {
-      shifts[axis] = unfolded_shifts(
+      feasible.along[axis] = unfolded_shifts(
           spec.dims[axis], std::max(target_min[axis] - moving.occupied_max[axis], -max_shift[axis]),
           std::min(target_max[axis] - moving.occupied_min[axis], max_shift[axis]));
     }
+    return feasible;
+  }
+
+  // The correlation (the inverse transform of the cross power in `spectrum`, which it
+  // overwrites) at the feasible shifts only: a small search range costs its share of the
+  // y and z passes.
+  void inverse_transform(const FeasibleShifts& feasible) {
+    const int ny = spec.dims.y(), nz = spec.dims.z();
+    auto* data = reinterpret_cast<fftwf_complex*>(spectrum.get());
+    fftwf_execute_dft(x_inverse, data, data);
+    const std::size_t slab = std::size_t(ny) * half_z;
+    for (int i = 0; i < spec.dims.x(); ++i) {
+      if (feasible.along[0][i] == INT_MIN) continue;
+      fftwf_execute_dft(y_inverse, data + i * slab, data + i * slab);
+      for (int j = 0; j < ny; ++j) {
+        if (feasible.along[1][j] == INT_MIN) continue;
+        const std::size_t row = std::size_t(i) * ny + j;
+        fftwf_execute_dft_c2r(z_inverse, data + row * half_z, output.get() + row * nz);
+      }
+    }
+  }
+
+  // The largest correlation over feasible shifts. Along z the feasible indices form at
+  // most two runs; each run's maximum is a vectorised reduction, and the index is
+  // searched only in a run that beats the best so far.
+  Eigen::Vector3i find_peak(const FeasibleShifts& feasible, float& height) const {
+    const std::vector<int>* shifts = feasible.along;
     const std::vector<std::pair<int, int>> runs = feasible_runs(shifts[2]);
     const int ny = spec.dims.y(), nz = spec.dims.z();
     height = -INFINITY;
@@ -460,12 +496,12 @@ TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving,
   im.transform(moving, im.spectrum.get());
   if (im.params.subvoxel) im.gather_low_bins();
   im.form_cross_power();
-  fftwf_execute_dft_c2r(im.inverse, reinterpret_cast<fftwf_complex*>(im.spectrum.get()),
-                        im.output.get());
+  const Impl::FeasibleShifts feasible = im.feasible_shifts(moving, max_shift);
+  im.inverse_transform(feasible);
 
   TranslationEstimate result;
   float height = 0.0f;
-  result.peak_voxels = im.find_peak(moving, max_shift, height);
+  result.peak_voxels = im.find_peak(feasible, height);
   result.peak = im.phase_bins > 0.0 ? std::clamp(double(height) / im.phase_bins, 0.0, 1.0) : 0.0;
   result.shift_voxels = result.peak_voxels.cast<double>();
   if (im.params.subvoxel) result.shift_voxels += im.fit_phase_plane(result.peak_voxels);

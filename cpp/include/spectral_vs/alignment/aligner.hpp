@@ -33,7 +33,12 @@ struct AlignParams {
   double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
   double tolerance = 0.02;          ///< eps_g of eq. (17): stop when |translation step| in voxels
                                     ///< plus |grad C| (normalised correlation per radian) < eps_g.
-  int max_iterations = 100;         ///< Iterations of Algorithm 1 per run, >= 1.
+  int max_iterations = 100;         ///< Iterations of Algorithm 1, >= 1 (the paper's mode).
+  /// With global search: iterations of Algorithm 1 per refinement, >= 1. Each starts at a
+  /// verified hypothesis and is then polished and ICP-refined: 20 ended as well as 100
+  /// on every experiment family (docs/experiments.md), where cluttered windows made a
+  /// third of the runs chatter to 100 without converging.
+  int refinement_iterations = 20;
   /// Time budget of the whole alignment, seconds, >= 0 (0: none). Checked after every
   /// iteration, hypothesis and refinement: past it, the best pose so far is returned with
   /// converged = false and stop_reason = max_seconds (the one setting whose result depends
