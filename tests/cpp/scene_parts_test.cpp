@@ -167,6 +167,29 @@ TEST(ConnectedParts, AgreeWithSingleLinkageByBruteForce) {
   }
 }
 
+TEST(NormalDirection, IsTheNearestOfTheTwentySixByBruteForce) {
+  std::vector<Eigen::Vector3d> table;
+  for (int x = -1; x <= 1; ++x)
+    for (int y = -1; y <= 1; ++y)
+      for (int z = -1; z <= 1; ++z)
+        if (x || y || z) table.push_back(Eigen::Vector3d(x, y, z).normalized());
+  std::mt19937 rng(3);
+  std::normal_distribution<double> gauss;
+  for (int trial = 0; trial < 20000; ++trial) {
+    Eigen::Vector3d n(gauss(rng), gauss(rng), gauss(rng));
+    if (trial % 4 == 0) n[trial % 3] = 0.0;  // on the grid's planes too
+    n.normalize();
+    double best = -2.0;
+    for (const auto& d : table) best = std::max(best, d.dot(n));
+    const int fast = normal_direction(n);
+    std::uint32_t cone = 0;
+    const int slow = normal_direction(n, &cone);
+    ASSERT_NEAR(table[std::size_t(fast)].dot(n), best, 1e-12) << n.transpose();
+    ASSERT_NEAR(table[std::size_t(slow)].dot(n), best, 1e-12) << n.transpose();
+    ASSERT_TRUE((cone >> fast) & 1u);
+  }
+}
+
 TEST(ConnectedParts, ObjectsAGapApartStayApart) {
   const PointCloud left = patch(0.0, 0.0, 1.0, 0.05, 0.004, kToSensor);
   const PointCloud right = patch(0.107, 0.0, 1.0, 0.05, 0.004, kToSensor);  // a 7 mm gap

@@ -148,7 +148,7 @@ IcpOutcome refine_point_to_plane(const PointCloud& model, const PointCloud& scen
     outcome.iterations = iteration + 1;
     outcome.T_scene_model.topLeftCorner<3, 3>() = R;
     outcome.T_scene_model.topRightCorner<3, 1>() = t;
-    if (step.head<3>().norm() < 1e-6 && step.tail<3>().norm() < 1e-6) break;
+    if (step.head<3>().norm() < 1e-4 && step.tail<3>().norm() < 2e-5) break;
   }
   return outcome;
 }

@@ -51,7 +51,32 @@ const std::array<Eigen::Vector3d, 26>& directions() {
 
 }  // namespace
 
+namespace {
+
+// The nearest of the 26 directions without trying each: the best direction with k
+// non-zero components takes the signs of the normal's k largest components, and scores
+// the sum of their magnitudes over sqrt(k).
+int nearest_direction(const Eigen::Vector3d& normal) {
+  const Eigen::Array3d a = normal.cwiseAbs();
+  int order[3] = {0, 1, 2};
+  if (a[order[0]] < a[order[1]]) std::swap(order[0], order[1]);
+  if (a[order[1]] < a[order[2]]) std::swap(order[1], order[2]);
+  if (a[order[0]] < a[order[1]]) std::swap(order[0], order[1]);
+  const double one = a[order[0]];
+  const double two = (a[order[0]] + a[order[1]]) * M_SQRT1_2;
+  const double three = (a[0] + a[1] + a[2]) * (1.0 / std::sqrt(3.0));
+  const int count = three > std::max(one, two) ? 3 : (two > one ? 2 : 1);
+  int component[3] = {0, 0, 0};
+  for (int k = 0; k < count; ++k) component[order[k]] = normal[order[k]] < 0.0 ? -1 : 1;
+  // The table's order: x, then y, then z from -1 to 1, without the zero vector (13).
+  const int t = (component[0] + 1) * 9 + (component[1] + 1) * 3 + (component[2] + 1);
+  return t < 13 ? t : t - 1;
+}
+
+}  // namespace
+
 int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone) {
+  if (!cone) return nearest_direction(normal);
   int best = 0;
   double best_dot = -2.0;
   std::uint32_t within = 0;

@@ -18,7 +18,7 @@ namespace spectral_vs::detail {
 int voxels_along(double length, double voxel_size, const GridLimits& limits);
 
 /// The nearest of the 26 directions to a voxel's neighbours (about 35-45 degrees apart)
-/// to `normal`, the first of equals; in `cone`, if given, every direction within 50
+/// to `normal` (either of exact equals); in `cone`, if given, every direction within 50
 /// degrees of it together with the nearest.
 int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullptr);
 

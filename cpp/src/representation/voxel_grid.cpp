@@ -15,22 +15,6 @@ std::size_t GridSpec::voxel_count() const {
          static_cast<std::size_t>(std::max(dims.z(), 0));
 }
 
-Eigen::Vector3i GridSpec::index_of(const Eigen::Vector3d& p) const {
-  // Clamped before the conversion, which is undefined beyond the range of int: a point
-  // a million metres off a millimetre grid is far outside it, not wrapped back in.
-  Eigen::Vector3i index;
-  for (int axis = 0; axis < 3; ++axis) {
-    const double v = std::floor((p[axis] - origin[axis]) / resolution);
-    const double limit = kMaxGridIndex;
-    index[axis] = v >= -limit ? (v <= limit ? static_cast<int>(v) : kMaxGridIndex) : -kMaxGridIndex;
-  }
-  return index;
-}
-
-bool GridSpec::contains(const Eigen::Vector3i& index) const {
-  return (index.array() >= 0).all() && (index.array() < dims.array()).all();
-}
-
 namespace {
 
 // Transform lengths on which FFTW's estimated plans are fast, measured here as the time

@@ -5,6 +5,7 @@
 #include <spectral_vs/representation/point_cloud.hpp>
 
 #include <Eigen/Geometry>
+#include <cmath>
 #include <cstddef>
 #include <vector>
 
@@ -29,6 +30,23 @@ struct GridSpec {
   Eigen::Vector3i index_of(const Eigen::Vector3d& p) const;
   bool contains(const Eigen::Vector3i& index) const;
 };
+
+// Inline: called for every point of every voxelization and fitness check.
+inline Eigen::Vector3i GridSpec::index_of(const Eigen::Vector3d& p) const {
+  // Clamped before the conversion, which is undefined beyond the range of int: a point
+  // a million metres off a millimetre grid is far outside it, not wrapped back in.
+  Eigen::Vector3i index;
+  for (int axis = 0; axis < 3; ++axis) {
+    const double v = std::floor((p[axis] - origin[axis]) / resolution);
+    const double limit = kMaxGridIndex;
+    index[axis] = v >= -limit ? (v <= limit ? static_cast<int>(v) : kMaxGridIndex) : -kMaxGridIndex;
+  }
+  return index;
+}
+
+inline bool GridSpec::contains(const Eigen::Vector3i& index) const {
+  return (index.array() >= 0).all() && (index.array() < dims.array()).all();
+}
 
 /// Memory guard for every grid the library allocates: a grid over the limit is refused
 /// with std::invalid_argument naming `max_voxels` before any of it is allocated. A voxel
