@@ -784,6 +784,14 @@ def main() -> None:
         "figures and docs/experiments.md)",
     )
     parser.add_argument(
+        "--ours-setting",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an AlignParams setting of the 'ours' mode, e.g. icp_refinement=false "
+        "(repeatable; use with --output to keep the default results)",
+    )
+    parser.add_argument(
         "--report-only",
         action="store_true",
         help="redo the figures and tables from the JSON without running",
@@ -795,6 +803,11 @@ def main() -> None:
         results["diagnosis"] = diagnosis([r for r in results["records"] if not r["sweep"]])
         report(results)
         return
+    for setting in args.ours_setting:
+        name, _, value = setting.partition("=")
+        if not hasattr(svs.AlignParams(), name):
+            parser.error(f"--ours-setting: AlignParams has no setting {name!r}")
+        MODES["ours"][name] = json.loads(value)
     families = parse_list(args.families, str)
     unknown = set(families) - set(case_lib.FAMILIES)
     if unknown:

@@ -82,9 +82,10 @@ suppress_support_plane : bool
     facing scene_viewpoint by phase correlation in a window around the part, at twice
     the voxel and then at the voxel (default True).
 polish : bool
-    With global search: after Algorithm 1, for a model whose EGI has a flat axis (a
-    mug's), the turns about that axis every 15 degrees scored by the overlap of the
-    model's voxels with the scene's; without icp_refinement, then a pattern search on the
+    With global search: for a model whose EGI has a flat axis (a mug's), each pose
+    Algorithm 1 ends at is turned to the best of the turns about that axis every 15
+    degrees, scored by the overlap of the model's voxels with the scene's, before the
+    poses are compared; without icp_refinement, then a pattern search on the kept
     rotation (4 to 1/4 degree steps) for the same overlap (default True). Skipped for
     models sampled sparser than 2 points per occupied voxel.
 icp_refinement : bool

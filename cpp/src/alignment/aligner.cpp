@@ -616,7 +616,7 @@ std::optional<Eigen::Vector3d> flat_axis(const ShCoefficients& model_coefficient
 }
 
 // The turns of the model about its flat axis, every kFlatAxisStep, each placed by phase
-// correlation and scored by voxel overlap: the best, which the polish then refines.
+// correlation and scored by voxel overlap: the best.
 Pose sweep_flat_axis(const Problem& problem, TranslationWindow& window, const Pose& pose,
                      const Eigen::Vector3d& axis, int& evaluations) {
   window.follow(problem.model.centre(pose));
@@ -635,17 +635,16 @@ Pose sweep_flat_axis(const Problem& problem, TranslationWindow& window, const Po
   return best;
 }
 
-void polish_result(const Problem& problem, const std::optional<Eigen::Vector3d>& axis,
-                   std::optional<TranslationWindow>& window, AlignResult& result) {
-  Pose start = problem.model.pose_of(result.T_scene_model);
+// The pose of `result` moved by `step` (the flat-axis sweep or the pattern search) in a
+// window placed around it; left as it is for a model too sparse for the voxel overlap.
+template <typename Step>
+void polish_result(const Problem& problem, std::optional<TranslationWindow>& window,
+                   AlignResult& result, Step step) {
+  const Pose start = problem.model.pose_of(result.T_scene_model);
   if (points_per_voxel(problem.model.move(start), problem.params.voxel_size) < kPolishMinDensity)
     return;
   place_window(problem, window, problem.model.centre(start));
-  if (axis) start = sweep_flat_axis(problem, *window, start, *axis, result.polish_evaluations);
-  // The final ICP reaches past the pattern search's accuracy, at a fraction of its cost.
-  const Pose polished = problem.params.icp_refinement
-                            ? start
-                            : polish(problem, *window, start, result.polish_evaluations);
+  const Pose polished = step(*window, start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
   result.fitness =
       problem.model.fitness(problem.scene, problem.view, polished, problem.params.voxel_size);
@@ -758,8 +757,14 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   for (int i = 0; i < runs && !out_of_time; ++i) {
     AlignResult result =
         refine_hypothesis(problem, correlation, scene_coefficients, hypotheses[i], window);
-    // A view's fitness tells the truth from a near-symmetric flip only at a precise pose:
-    // each result is refined before they are compared.
+    // Fitness tells a mug upright from upside down only with its handle in place, and a
+    // view's fitness a pose from its near-symmetric flip only at a precise pose: each
+    // result is swept and refined before they are compared.
+    if (params.polish && axis) {
+      polish_result(problem, window, result, [&](TranslationWindow& w, const Pose& p, int& n) {
+        return sweep_flat_axis(problem, w, p, *axis, n);
+      });
+    }
     if (params.icp_refinement && view) refine_with_icp(problem, model, scene, result);
     out_of_time = result.stop_reason == AlignStopReason::max_seconds || expired(problem);
     if (i == 0 || better(result, best)) best = std::move(result);
@@ -769,7 +774,12 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     best.converged = false;
     best.stop_reason = AlignStopReason::max_seconds;
   } else {
-    if (params.polish) polish_result(problem, axis, window, best);
+    // Without the ICP, which reaches past it at a fraction of its cost.
+    if (params.polish && !params.icp_refinement) {
+      polish_result(problem, window, best, [&](TranslationWindow& w, const Pose& p, int& n) {
+        return polish(problem, w, p, n);
+      });
+    }
     if (params.icp_refinement) refine_with_icp(problem, model, scene, best);
   }
   best.search_voxel_size = search_voxel;

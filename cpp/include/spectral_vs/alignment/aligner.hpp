@@ -82,15 +82,16 @@ struct AlignParams {
   /// its rotations placed by phase correlation in a window around it (at twice the voxel,
   /// then at the voxel), from the model's side facing scene_viewpoint if set.
   bool suppress_support_plane = true;
-  bool polish = true;  ///< With global search: after Algorithm 1, for a model whose EGI
-                       ///< has a flat axis (its smallest autocorrelation curvature
-                       ///< under a tenth of the largest: a mug's axis, its handle a
-                       ///< few percent of the normals), the turns about that axis every
-                       ///< 15 degrees, scored by the overlap of the model's voxels with
-                       ///< the scene's. Without icp_refinement, then a pattern search on
-                       ///< the rotation (4 to 1/4 degree steps) for the same overlap,
-                       ///< past the EGI's accuracy floor. Skipped for models sampled
-                       ///< sparser than 2 points per occupied voxel.
+  bool polish = true;  ///< With global search: for a model whose EGI has a flat axis
+                       ///< (its smallest autocorrelation curvature under a tenth of the
+                       ///< largest: a mug's axis, its handle a few percent of the
+                       ///< normals), each pose Algorithm 1 ends at is turned to the best
+                       ///< of the turns about that axis every 15 degrees, scored by the
+                       ///< overlap of the model's voxels with the scene's, before the
+                       ///< poses are compared. Without icp_refinement, then a pattern
+                       ///< search on the kept rotation (4 to 1/4 degree steps) for the
+                       ///< same overlap, past the EGI's accuracy floor. Skipped for
+                       ///< models sampled sparser than 2 points per occupied voxel.
   /// With global search: a point-to-plane ICP from the result (each model point paired
   /// with its nearest scene point within voxel_size whose normal agrees within 45
   /// degrees; with scene_viewpoint, the model points facing it only; Gauss-Newton, up to
