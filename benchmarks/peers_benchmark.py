@@ -705,7 +705,8 @@ def replace_methods(base: dict, new: dict) -> dict:
     """``base`` with the records of ``new``'s methods on ``new``'s families taken from
     ``new`` (a rerun of some methods, e.g. ours after a change), every other record kept.
     The runs must share the settings and, per family, the cases. ``replaced`` records
-    each such rerun (methods, families, command, build, date, load, runtime)."""
+    each such rerun (methods, families, command, build, date, load, runtime) whose rows
+    are still there: a rerun of the same methods and families supersedes the earlier."""
     for key in ("threads", "settings", "voxel_size", "success"):
         if base[key] != new[key]:
             raise ValueError(f"the runs differ in {key}: not merged")
@@ -727,11 +728,16 @@ def replace_methods(base: dict, new: dict) -> dict:
     rerun = {"methods": new["methods"], "families": list(new["cases_per_family"])}
     rerun |= {"command": new["commands"][0]}
     rerun |= {k: new[k] for k in ("date", "commit", "core_sha256", "load_average", "runtime_s")}
+    still_there = [
+        r
+        for r in base.get("replaced", [])
+        if not (set(r["methods"]) <= methods and set(r["families"]) <= families)
+    ]
     merged = dict(base)
     merged |= {
-        "commands": base["commands"] + new["commands"],
+        "commands": list(dict.fromkeys(base["commands"] + new["commands"])),
         "runtime_s": base["runtime_s"] + new["runtime_s"],
-        "replaced": [*base.get("replaced", []), rerun],
+        "replaced": [*still_there, rerun],
         "determinism_records": replaced("determinism_records"),
         "records": replaced("records"),
     }

@@ -127,3 +127,13 @@ def test_replace_methods_keeps_every_other_methods_rows() -> None:
     assert merged["runtime_s"] == 120.0 and merged["commands"] == ["a", "b"]
     with pytest.raises(ValueError, match="cases of full"):
         peers_benchmark.replace_methods(base, _run(_records("ours", True, ids[:1]), ["ours"], "c"))
+    # A second rerun of ours supersedes the first: one provenance line, each command once.
+    again = peers_benchmark.replace_methods(
+        merged, _run(_records("ours", True, ids), ["ours"], "b")
+    )
+    assert [r["core_sha256"] for r in again["replaced"]] == ["b"]
+    assert again["commands"] == ["a", "b"]
+    peer = peers_benchmark.replace_methods(
+        again, _run(_records("o3d_icp", True, ids), ["o3d_icp"], "d")
+    )
+    assert [r["core_sha256"] for r in peer["replaced"]] == ["b", "d"]

@@ -650,25 +650,35 @@ void polish_result(const Problem& problem, std::optional<TranslationWindow>& win
       problem.model.fitness(problem.scene, problem.view, polished, problem.params.voxel_size);
 }
 
-// The ICP refinement of the kept result (AlignParams::icp_refinement), against the whole
-// scene; kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
+// The ICP refinement of a result (AlignParams::icp_refinement), against the whole scene;
+// kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
 constexpr double kIcpFitnessLoss = 0.05;
+// Pairs within a voxel first (the spectral result may be most of one off), then within
+// this share of one, which leaves out pairs that only the noise brought near: on single
+// views 0.34 to 0.22 degree and 0.29 to 0.13 mm at the median, against 0.25 and 0.6.
+constexpr double kIcpFineDistance = 0.4;
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result) {
   detail::IcpSettings settings;
-  settings.max_distance = problem.params.voxel_size;
   settings.viewpoint = problem.params.scene_viewpoint;
-  const detail::IcpOutcome outcome =
-      detail::refine_point_to_plane(model, scene, result.T_scene_model, settings);
-  if (outcome.iterations == 0) return;
-  const double fitness = problem.model.fitness(problem.scene, problem.view,
-                                               problem.model.pose_of(outcome.T_scene_model),
-                                               problem.params.voxel_size);
+  Transform T_scene_model = result.T_scene_model;
+  int iterations = 0;
+  for (const double distance : {1.0, kIcpFineDistance}) {
+    settings.max_distance = distance * problem.params.voxel_size;
+    const detail::IcpOutcome outcome =
+        detail::refine_point_to_plane(model, scene, T_scene_model, settings);
+    if (outcome.iterations == 0) break;
+    T_scene_model = outcome.T_scene_model;
+    iterations += outcome.iterations;
+  }
+  if (iterations == 0) return;
+  const double fitness = problem.model.fitness(
+      problem.scene, problem.view, problem.model.pose_of(T_scene_model), problem.params.voxel_size);
   if (fitness < result.fitness - kIcpFitnessLoss) return;
-  result.T_scene_model = outcome.T_scene_model;
+  result.T_scene_model = T_scene_model;
   result.fitness = fitness;
-  result.icp_iterations = outcome.iterations;
+  result.icp_iterations = iterations;
 }
 
 bool better(const AlignResult& a, const AlignResult& b) {
