@@ -90,7 +90,8 @@ polish : bool
     models sampled sparser than 2 points per occupied voxel.
 icp_refinement : bool
     With global search: a point-to-plane ICP (pairs within voxel_size whose normals agree
-    within 45 degrees, then within 0.4 voxel_size; with scene_viewpoint the model's
+    within 45 degrees, then, for a model of at least 2 points per occupied voxel, within
+    0.4 voxel_size; with scene_viewpoint the model's
     points facing it only), kept
     unless it lowers fitness by more than 0.05 (default True); with scene_viewpoint on
     every Algorithm 1 result before they are compared, and last on the kept one. The one

@@ -202,6 +202,7 @@ struct Problem {
   double margin;
   Clock::time_point deadline = Clock::time_point::max();    // of params.max_seconds
   std::optional<Eigen::Vector3d> flat_axis = std::nullopt;  // of the model's EGI, if it has one
+  bool dense_model = true;  // at least kPolishMinDensity points per occupied voxel
 };
 
 // The time limit of params.max_seconds from `start` (none for 0).
@@ -653,9 +654,12 @@ void polish_result(const Problem& problem, std::optional<TranslationWindow>& win
 // The ICP refinement of a result (AlignParams::icp_refinement), against the whole scene;
 // kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
 constexpr double kIcpFitnessLoss = 0.05;
-// Pairs within a voxel first (the spectral result may be most of one off), then within
-// this share of one, which leaves out pairs that only the noise brought near: on single
-// views 0.34 to 0.22 degree and 0.29 to 0.13 mm at the median, against 0.25 and 0.6.
+// Pairs within a voxel first (the spectral result may be most of one off), then, for a
+// densely sampled model, within this share of one, which leaves out pairs that only the
+// noise brought near: on single views 0.34 to 0.22 degree and 0.29 to 0.13 mm at the
+// median, against 0.25 and 0.6. On a sparse scan (one point per voxel) the nearest points
+// are mostly farther than that, and the few pairs left turned the bunny scan 0.3 to 4
+// degrees.
 constexpr double kIcpFineDistance = 0.4;
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
@@ -664,8 +668,9 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
   settings.viewpoint = problem.params.scene_viewpoint;
   Transform T_scene_model = result.T_scene_model;
   int iterations = 0;
-  for (const double distance : {1.0, kIcpFineDistance}) {
-    settings.max_distance = distance * problem.params.voxel_size;
+  const int stages = problem.dense_model ? 2 : 1;
+  for (int stage = 0; stage < stages; ++stage) {
+    settings.max_distance = (stage == 0 ? 1.0 : kIcpFineDistance) * problem.params.voxel_size;
     const detail::IcpOutcome outcome =
         detail::refine_point_to_plane(model, scene, T_scene_model, settings);
     if (outcome.iterations == 0) break;
@@ -743,9 +748,10 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis = flat_axis(model_coefficients, params.bandwidth);
+  const bool dense = points_per_voxel(model.points(), params.voxel_size) >= kPolishMinDensity;
   const Problem problem{scene_map,          view_ptr, moving,
                         model_coefficients, params,   window_margin(search_voxel, params),
-                        deadline,           axis};
+                        deadline,           axis,     dense};
   std::optional<TranslationWindow> window;
   std::vector<std::vector<Eigen::Index>> parts;
   if (plane) {

@@ -94,13 +94,14 @@ struct AlignParams {
                        ///< models sampled sparser than 2 points per occupied voxel.
   /// With global search: a point-to-plane ICP from the result (each model point paired
   /// with its nearest scene point within voxel_size whose normal agrees within 45
-  /// degrees, then within 0.4 voxel_size; with scene_viewpoint, the model points facing
-  /// it only; Gauss-Newton, up to 30 steps each), kept unless it lowers fitness by more
-  /// than 0.05. With scene_viewpoint it
-  /// refines every Algorithm 1 result before they are compared (a view's fitness tells
-  /// a pose from its near-symmetric flip only when both are precise), and the kept one
-  /// after the polish. Not spectral: the one local step, past the voxel grid's and the
-  /// EGI's accuracy (docs/experiments.md measures with and without).
+  /// degrees, then, for a model of at least 2 points per occupied voxel, within 0.4
+  /// voxel_size; with scene_viewpoint, the model points facing it only; Gauss-Newton, up
+  /// to 30 steps each), kept unless it lowers fitness by more than 0.05. With
+  /// scene_viewpoint it refines every Algorithm 1 result before they are compared (a
+  /// view's fitness tells a pose from its near-symmetric flip only when both are
+  /// precise), and the kept one after the polish. Not spectral: the one local step, past
+  /// the voxel grid's and the EGI's accuracy (docs/experiments.md measures with and
+  /// without).
   bool icp_refinement = true;
   bool subvoxel = true;  ///< Sub-voxel refinement of the phase-correlation peak.
   Occupancy occupancy = Occupancy::trilinear;    ///< Voxel values (the paper: binary).
