@@ -6,6 +6,7 @@
 
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
+#include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
@@ -83,79 +84,20 @@ void check_params(const AlignParams& p) {
   if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
 }
 
-// The model's pose as a rotation about its centroid c and a translation of it:
-// x_scene = R (x_model - c) + c + offset.
-struct Pose {
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
-};
+using detail::Pose;
 
-// The model as Algorithm 1 moves it, rotating about its centroid.
-class MovingModel {
+// The moving model scored against the scene: against what its sensor saw, with depths
+// within `tolerance` metres, when the scene is one view.
+class MovingModel : public detail::MovingModel {
  public:
-  explicit MovingModel(const PointCloud& model)
-      : centroid_(model.centroid()),
-        centred_(model.points().rowwise() - centroid_.transpose()),
-        normals_(model.normals()) {
-    reach_ = centred_.rowwise().norm().maxCoeff();
-  }
+  using detail::MovingModel::MovingModel;
 
-  double reach() const { return reach_; }
-
-  // Where the centroid of the model's side facing `direction` (a viewing ray) is, from
-  // the model's centroid, with the model turned by R: a single view shows that side.
-  Eigen::Vector3d facing_side(const Eigen::Matrix3d& R, const Eigen::Vector3d& direction) const {
-    const Eigen::Vector3d local = R.transpose() * direction;
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    int count = 0;
-    for (Eigen::Index i = 0; i < centred_.rows(); ++i) {
-      if (normals_.row(i).dot(local) < 0.0) {
-        sum += centred_.row(i).transpose();
-        ++count;
-      }
-    }
-    return count ? Eigen::Vector3d(R * sum / double(count)) : Eigen::Vector3d::Zero();
-  }
-  const Eigen::Vector3d& centroid() const { return centroid_; }
-  Eigen::Vector3d centre(const Pose& pose) const { return centroid_ + pose.offset; }
-
-  Pose pose_of(const Transform& T_scene_model) const {
-    Pose pose;
-    pose.R = T_scene_model.topLeftCorner<3, 3>();
-    pose.offset = T_scene_model.topRightCorner<3, 1>() + pose.R * centroid_ - centroid_;
-    return pose;
-  }
-
-  Transform transform_of(const Pose& pose) const {
-    Transform T = Transform::Identity();
-    T.topLeftCorner<3, 3>() = pose.R;
-    T.topRightCorner<3, 1>() = centroid_ + pose.offset - pose.R * centroid_;
-    return T;
-  }
-
-  // The model's points at `pose`, in the scene.
-  const Points& move(const Pose& pose) {
-    moved_.noalias() = centred_ * pose.R.transpose();
-    moved_.rowwise() += centre(pose).transpose();
-    return moved_;
-  }
-
-  // The model's points and normals at `pose`, scored against the scene; against what
-  // its sensor saw, with depths within `tolerance` metres, when the scene is one view.
   double fitness(const SceneMap& scene, const RangeImage* view, const Pose& pose,
                  double tolerance) {
-    moved_normals_.noalias() = normals_ * pose.R.transpose();
+    const Points& normals = turned_normals(pose);
     const Points& moved = move(pose);
-    return view ? view->check(moved, moved_normals_, tolerance).fitness()
-                : scene.fitness(moved, moved_normals_);
+    return view ? view->check(moved, normals, tolerance).fitness() : scene.fitness(moved, normals);
   }
-
- private:
-  Eigen::Vector3d centroid_;
-  Points centred_;
-  Points normals_;
-  Points moved_, moved_normals_;
-  double reach_ = 0.0;
 };
 
 Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params) {

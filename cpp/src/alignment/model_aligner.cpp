@@ -6,6 +6,7 @@
 
 #include "alignment/align_detail.hpp"
 #include "alignment/fitness_map.hpp"
+#include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
@@ -27,12 +28,7 @@ double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// The model's pose as a rotation about its centroid c and a translation of it:
-// x_scene = R (x_model - c) + c + offset (as in align()).
-struct Pose {
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
-};
+using detail::Pose;
 
 }  // namespace
 
@@ -40,13 +36,10 @@ struct ModelAligner::Impl {
   PointCloud model;
   AlignParams params;
   // The model's side, prepared once.
-  Eigen::Vector3d centroid;
-  Points centred, normals;
-  double reach = 0.0;
+  std::optional<detail::MovingModel> moving_model;
   ShCoefficients model_coefficients;
   Eigen::Vector3i max_shift = Eigen::Vector3i::Zero();  // voxels, of max_translation
-  // Re-used per scene: the moved model, the translation grid's transforms and voxels.
-  Points moved, moved_normals;
+  // Re-used per scene: the translation grid's transforms and voxels.
   std::optional<PhaseCorrelation> phase;
   VoxelGrid target, moving;
   detail::FitnessMap fitness_map;
@@ -55,33 +48,19 @@ struct ModelAligner::Impl {
   bool local() const { return !params.global_search && params.max_translation > 0.0; }
 
   Pose pose_of(const Transform& T_scene_model) const {
-    Pose pose;
-    pose.R = T_scene_model.topLeftCorner<3, 3>();
-    pose.offset = T_scene_model.topRightCorner<3, 1>() + pose.R * centroid - centroid;
-    return pose;
+    return moving_model->pose_of(T_scene_model);
   }
-
-  Transform transform_of(const Pose& pose) const {
-    Transform T = Transform::Identity();
-    T.topLeftCorner<3, 3>() = pose.R;
-    T.topRightCorner<3, 1>() = centroid + pose.offset - pose.R * centroid;
-    return T;
-  }
-
-  const Points& move(const Pose& pose) {
-    moved.noalias() = centred * pose.R.transpose();
-    moved.rowwise() += (centroid + pose.offset).transpose();
-    return moved;
-  }
+  Transform transform_of(const Pose& pose) const { return moving_model->transform_of(pose); }
+  const Points& move(const Pose& pose) { return moving_model->move(pose); }
 
   // The fitness as align() scores it, built for this pose only.
   double fitness(const PointCloud& scene, const GridSpec& map, const Pose& pose) {
-    moved_normals.noalias() = normals * pose.R.transpose();
+    const Points& normals = moving_model->turned_normals(pose);
     const Points& points = move(pose);
-    if (!params.scene_viewpoint) return fitness_map.fitness(scene, map, points, moved_normals);
+    if (!params.scene_viewpoint) return fitness_map.fitness(scene, map, points, normals);
     const detail::RangeImage view(scene, *params.scene_viewpoint,
                                   0.5 * params.voxel_size);  // as align() makes it
-    return view.check(points, moved_normals, params.voxel_size).fitness();
+    return view.check(points, normals, params.voxel_size).fitness();
   }
 
   // The scene's voxels and spectrum on the bounded grid around the model's start; the
@@ -188,10 +167,7 @@ ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
   Impl& im = *impl_;
   im.model = model;
   im.params = params;
-  im.centroid = model.centroid();
-  im.centred = model.points().rowwise() - im.centroid.transpose();
-  im.normals = model.normals();
-  im.reach = im.centred.rowwise().norm().maxCoeff();
+  im.moving_model.emplace(model);
   im.model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
   if (im.local()) {
     im.max_shift = Eigen::Vector3i::Constant(
