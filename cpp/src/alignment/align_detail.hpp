@@ -3,8 +3,10 @@
 
 #include <spectral_vs/alignment/aligner.hpp>
 #include <spectral_vs/rotation/so3_correlation.hpp>
+#include <spectral_vs/translation/phase_correlation.hpp>
 
 #include <Eigen/Core>
+#include <chrono>
 
 namespace spectral_vs::detail {
 
@@ -15,5 +17,12 @@ void check_align_params(const AlignParams& params);
 /// rotation (its gradient and Hessian): Newton or gradient law, capped at
 /// params.max_rotation_step; a rotation vector, radians.
 Eigen::Vector3d align_rotation_step(const CorrelationValue& c, const AlignParams& params);
+
+/// The time limit of params.max_seconds from `start` (none for 0).
+std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
+                                                  std::chrono::steady_clock::time_point start);
+
+/// The phase-correlation settings of the alignment's grids (sub-voxel, threads, limits).
+PhaseCorrelationParams phase_params(const AlignParams& params);
 
 }  // namespace spectral_vs::detail

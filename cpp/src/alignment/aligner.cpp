@@ -16,11 +16,14 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 #include <optional>
 
 namespace spectral_vs {
 
+using detail::deadline_of;
 using detail::fail;
+using detail::phase_params;
 using detail::RangeImage;
 using detail::SceneMap;
 using detail::SceneTranslation;
@@ -147,22 +150,7 @@ struct Problem {
   bool dense_model = true;  // at least kPolishMinDensity points per occupied voxel
 };
 
-// The time limit of params.max_seconds from `start` (none for 0).
-Clock::time_point deadline_of(const AlignParams& params, Clock::time_point start) {
-  if (params.max_seconds == 0.0) return Clock::time_point::max();
-  const std::chrono::duration<double> budget(std::min(params.max_seconds, 1e9));  // no overflow
-  return start + std::chrono::duration_cast<Clock::duration>(budget);
-}
-
 bool expired(const Problem& problem) { return Clock::now() > problem.deadline; }
-
-PhaseCorrelationParams phase_params(const AlignParams& params) {
-  PhaseCorrelationParams p;
-  p.subvoxel = params.subvoxel;
-  p.threads = params.threads;
-  p.limits = params.limits;
-  return p;
-}
 
 // Made once (its FFT plans are re-used), then moved to each place Algorithm 1 runs.
 void place_window(const Problem& problem, std::optional<TranslationWindow>& window,
@@ -246,10 +234,8 @@ std::optional<ShCoefficients> window_coefficients(const SceneMap& scene,
                                 centre + Eigen::Vector3d::Constant(half_width));
   const std::vector<Eigen::Index> rows = scene.points_in(box);
   if (rows.size() < 3) return std::nullopt;
-  Points normals(static_cast<Eigen::Index>(rows.size()), 3);
-  for (std::size_t i = 0; i < rows.size(); ++i)
-    normals.row(Eigen::Index(i)) = scene.cloud().normals().row(rows[i]);
-  return egi_coefficients(normals, params.bandwidth, params.egi_method);
+  return egi_coefficients(detail::rows_of(scene.cloud().normals(), rows), params.bandwidth,
+                          params.egi_method);
 }
 
 struct Hypothesis {
@@ -257,6 +243,12 @@ struct Hypothesis {
   Pose pose;
   double fitness = 0.0;
 };
+
+// Fittest first; equals keep their order.
+void rank(std::vector<Hypothesis>& hypotheses) {
+  std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+}
 
 // Beyond the paper: the best rotations of the SO(3) search, each refined on the EGI
 // correlation and placed by a phase correlation over the whole scene (coarse voxels),
@@ -287,8 +279,7 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
         problem.model.fitness(problem.scene, problem.view, hypothesis.pose, search_voxel);
     hypotheses.push_back(hypothesis);
   }
-  std::stable_sort(hypotheses.begin(), hypotheses.end(),
-                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+  rank(hypotheses);
   return hypotheses;
 }
 
@@ -311,9 +302,7 @@ std::vector<std::vector<Eigen::Index>> object_parts(
     if (!plane || searched.points().row(i).dot(plane->normal) - plane->offset > 1.5 * voxel_size)
       above.push_back(i);
   }
-  Points points(Eigen::Index(above.size()), 3);
-  for (std::size_t i = 0; i < above.size(); ++i)
-    points.row(Eigen::Index(i)) = searched.points().row(above[i]);
+  const Points points = detail::rows_of(searched.points(), above);
   const auto plausible = [&](const std::vector<Eigen::Index>& part) {
     Eigen::AlignedBox3d box;
     for (const Eigen::Index i : part) box.extend(searched.points().row(i).transpose());
@@ -335,7 +324,7 @@ std::vector<std::vector<Eigen::Index>> object_parts(
 // shows): the whole view is the one part, placed from the model's side facing the sensor.
 std::vector<Eigen::Index> whole_view(const PointCloud& searched) {
   std::vector<Eigen::Index> all(searched.size());
-  for (std::size_t i = 0; i < all.size(); ++i) all[i] = Eigen::Index(i);
+  std::iota(all.begin(), all.end(), Eigen::Index(0));
   return all;
 }
 
@@ -357,12 +346,9 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
   std::optional<TranslationWindow> coarse;
   for (const auto& part : parts) {
     if (!hypotheses.empty() && expired(problem)) break;
-    Points normals(Eigen::Index(part.size()), 3);
+    const Points normals = detail::rows_of(scene.normals(), part);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-    for (std::size_t i = 0; i < part.size(); ++i) {
-      normals.row(Eigen::Index(i)) = scene.normals().row(part[i]);
-      centroid += scene.points().row(part[i]).transpose();
-    }
+    for (const Eigen::Index i : part) centroid += scene.points().row(i).transpose();
     centroid /= double(part.size());
     const ShCoefficients coefficients =
         egi_coefficients(normals, params.bandwidth, params.egi_method);
@@ -398,8 +384,7 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       hypotheses.push_back(hypothesis);
     }
   }
-  std::stable_sort(hypotheses.begin(), hypotheses.end(),
-                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+  rank(hypotheses);
   return hypotheses;
 }
 
@@ -426,8 +411,7 @@ void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypot
       }
     }
   }
-  std::stable_sort(hypotheses.begin(), hypotheses.end(),
-                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+  rank(hypotheses);
 }
 
 // Re-places `trial`'s translation by phase correlation in the window; its voxel overlap.
@@ -641,6 +625,22 @@ void check_align_params(const AlignParams& params) { check_params(params); }
 
 Eigen::Vector3d align_rotation_step(const CorrelationValue& c, const AlignParams& params) {
   return rotation_step(c, params);
+}
+
+std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
+                                                  std::chrono::steady_clock::time_point start) {
+  using Clock = std::chrono::steady_clock;
+  if (params.max_seconds == 0.0) return Clock::time_point::max();
+  const std::chrono::duration<double> budget(std::min(params.max_seconds, 1e9));  // no overflow
+  return start + std::chrono::duration_cast<Clock::duration>(budget);
+}
+
+PhaseCorrelationParams phase_params(const AlignParams& params) {
+  PhaseCorrelationParams p;
+  p.subvoxel = params.subvoxel;
+  p.threads = params.threads;
+  p.limits = params.limits;
+  return p;
 }
 
 }  // namespace detail

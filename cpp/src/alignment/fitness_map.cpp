@@ -82,9 +82,7 @@ double FitnessMap::fitness(const PointCloud& scene, const GridSpec& spec, const 
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Vector3i& v = voxel_[std::size_t(i)];
     if (spec.contains(v)) continue;
-    const Eigen::Array3i c = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
-    outside_.push_back((std::uint64_t(c.x()) << 42) | (std::uint64_t(c.y()) << 21) |
-                       std::uint64_t(c.z()));
+    outside_.push_back(voxel_key(v.array()));
   }
   std::sort(outside_.begin(), outside_.end());
   voxels += std::size_t(std::unique(outside_.begin(), outside_.end()) - outside_.begin());

@@ -72,12 +72,8 @@ struct ModelAligner::Impl {
     const GridSpec spec = detail::bounded_translation_spec(
         bounding_box(scene), model_box, params.max_translation, params.voxel_size, params.limits);
     if (!phase || phase->spec().dims != spec.dims) {
-      PhaseCorrelationParams p;
-      p.subvoxel = params.subvoxel;
-      p.threads = params.threads;
-      p.limits = params.limits;
       phase.reset();  // free the old buffers before allocating the new ones
-      phase.emplace(spec, p);
+      phase.emplace(spec, detail::phase_params(params));
     }
     voxelize_into(scene.points(), spec, params.occupancy, target, params.limits);
     phase->set_target(target);
@@ -88,11 +84,7 @@ struct ModelAligner::Impl {
   // translation over the whole scene.
   AlignResult run(const PointCloud& scene, const Transform& initial_guess,
                   Clock::time_point started) {
-    const Clock::time_point deadline =
-        params.max_seconds == 0.0
-            ? Clock::time_point::max()
-            : started + std::chrono::duration_cast<Clock::duration>(
-                            std::chrono::duration<double>(std::min(params.max_seconds, 1e9)));
+    const Clock::time_point deadline = detail::deadline_of(params, started);
     auto t = Clock::now();
     const ShCoefficients scene_coefficients =
         egi_coefficients(scene, params.bandwidth, params.egi_method);

@@ -24,10 +24,7 @@ std::size_t linear(const GridSpec& spec, const Eigen::Vector3i& v) {
 void voxelize_subset(const PointCloud& cloud, const std::vector<Eigen::Index>& rows,
                      const GridSpec& spec, Occupancy occupancy, VoxelGrid& grid,
                      const GridLimits& limits) {
-  Points points(static_cast<Eigen::Index>(rows.size()), 3);
-  for (std::size_t i = 0; i < rows.size(); ++i)
-    points.row(Eigen::Index(i)) = cloud.points().row(rows[i]);
-  voxelize_into(points, spec, occupancy, grid, limits);
+  voxelize_into(rows_of(cloud.points(), rows), spec, occupancy, grid, limits);
 }
 
 }  // namespace
@@ -75,6 +72,17 @@ int nearest_direction(const Eigen::Vector3d& normal) {
 
 }  // namespace
 
+Points rows_of(const Points& matrix, const std::vector<Eigen::Index>& rows) {
+  Points selected(static_cast<Eigen::Index>(rows.size()), 3);
+  for (std::size_t i = 0; i < rows.size(); ++i) selected.row(Eigen::Index(i)) = matrix.row(rows[i]);
+  return selected;
+}
+
+std::uint64_t voxel_key(const Eigen::Array3i& voxel) {
+  const Eigen::Array3i k = (voxel + (1 << 20)).max(0).min((1 << 21) - 1);
+  return (std::uint64_t(k.x()) << 42) | (std::uint64_t(k.y()) << 21) | std::uint64_t(k.z());
+}
+
 int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone) {
   if (!cone) return nearest_direction(normal);
   int best = 0;
@@ -88,7 +96,7 @@ int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone) {
     }
     if (dot > 0.6428) within |= 1u << i;  // cos(50 degrees)
   }
-  if (cone) *cone = within | (1u << best);
+  *cone = within | (1u << best);
   return best;
 }
 
@@ -140,10 +148,7 @@ double SceneMap::fitness(const Points& points, const Points& normals) const {
   seen_.clear();
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     const Eigen::Vector3i v = spec_.index_of(points.row(i).transpose());
-    const Eigen::Array3i c = (v.array() + (1 << 20)).max(0).min((1 << 21) - 1);
-    const std::uint64_t key =
-        (std::uint64_t(c.x()) << 42) | (std::uint64_t(c.y()) << 21) | std::uint64_t(c.z());
-    seen_.emplace_back(key, normal_direction(normals.row(i).transpose()));
+    seen_.emplace_back(voxel_key(v.array()), normal_direction(normals.row(i).transpose()));
   }
   std::sort(seen_.begin(), seen_.end());
   std::size_t voxels = 0, supported = 0;
@@ -455,11 +460,6 @@ struct DisjointSets {
   }
 };
 
-std::uint64_t cell_key(const Eigen::Array3i& c) {
-  const Eigen::Array3i k = (c + (1 << 20)).max(0).min((1 << 21) - 1);
-  return (std::uint64_t(k.x()) << 42) | (std::uint64_t(k.y()) << 21) | std::uint64_t(k.z());
-}
-
 }  // namespace
 
 std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, double tolerance) {
@@ -473,7 +473,7 @@ std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, dou
   std::vector<Eigen::Index> cell_of_point(std::size_t(points.rows()));
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     const Eigen::Array3i c = (points.row(i).array() / edge).floor().cast<int>();
-    const auto [it, added] = cell_index.try_emplace(cell_key(c), Eigen::Index(cells.size()));
+    const auto [it, added] = cell_index.try_emplace(voxel_key(c), Eigen::Index(cells.size()));
     if (added) {
       cells.push_back(c);
       members.emplace_back();
@@ -493,7 +493,7 @@ std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, dou
       for (int dy = -2; dy <= 2; ++dy)
         for (int dz = -2; dz <= 2; ++dz) {
           const auto it =
-              cell_index.find(cell_key(cells[std::size_t(a)] + Eigen::Array3i(dx, dy, dz)));
+              cell_index.find(voxel_key(cells[std::size_t(a)] + Eigen::Array3i(dx, dy, dz)));
           if (it == cell_index.end() || it->second <= a) continue;
           if (sets.find(a) != sets.find(it->second) && close(a, it->second))
             sets.unite(a, it->second);

@@ -13,6 +13,13 @@
 
 namespace spectral_vs::detail {
 
+/// The rows `rows` of `matrix`, in that order.
+Points rows_of(const Points& matrix, const std::vector<Eigen::Index>& rows);
+
+/// A voxel (or cell) index as one sortable key, 21 bits per axis, each index clamped to
+/// [-2^20, 2^20 - 1]: the sparse sets of voxels of the fitness and of connected_parts.
+std::uint64_t voxel_key(const Eigen::Array3i& voxel);
+
 /// ceil(length / voxel_size), the aligner's rule for the voxels of its grids.
 /// @throws std::invalid_argument (naming max_voxels) over the limit, before any overflow.
 int voxels_along(double length, double voxel_size, const GridLimits& limits);
