@@ -135,6 +135,24 @@ drop_non_finite : bool
       py::arg("path"), "Load a .pcd or .ply file; return (PointCloud, CloudFileInfo).");
 
   m.def(
+      "load_organized",
+      [](const std::filesystem::path& path) {
+        require_file(path);
+        CloudFileInfo info;
+        Points points;
+        {
+          py::gil_scoped_release release;
+          points = load_points(path.string(), &info);
+        }
+        py::array_t<double> out({py::ssize_t(info.height), py::ssize_t(info.width), py::ssize_t(3)});
+        std::copy(points.data(), points.data() + points.size(), out.mutable_data());
+        return out;
+      },
+      py::arg("path"),
+      "The points of a .pcd or .ply file as a (height, width, 3) array in metres, NaN where "
+      "an organized cloud has no return; an unorganized cloud gives (1, N, 3).");
+
+  m.def(
       "save_cloud",
       [](const std::filesystem::path& path, const PointCloud& cloud, const std::string& encoding) {
         const PcdEncoding parsed = parse_choice(encoding, kEncodings, "encoding");

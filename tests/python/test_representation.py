@@ -79,6 +79,27 @@ def test_load_organized_scene_drops_nans(data_dir):
     assert all(tuple(p) in scene_rows for p in milk.points.astype(np.float32)[:500])
 
 
+def test_load_organized_keeps_the_pixel_grid(data_dir, tmp_path):
+    path = data_dir / "milk_cartoon_all_small_clorox.pcd"
+    grid = svs.load_organized(path)
+    cloud, info = svs.load_cloud_with_info(path)
+    assert grid.shape == (480, 640, 3)
+    valid = np.isfinite(grid).all(axis=2)
+    assert int((~valid).sum()) == info.non_finite_dropped
+    # The finite pixels, in row-major order, are the points load_cloud returns.
+    np.testing.assert_array_equal(grid[valid], cloud.points)
+    # A pixel's point lies on its ray: column u at x / z = (u - cx) / fx, so x / z grows
+    # along a row by the same step (1 / fx) everywhere (Kinect: fx about 525 pixels).
+    v, u = np.nonzero(valid)
+    slope = np.polyfit(u, grid[v, u, 0] / grid[v, u, 2], 1)[0]
+    assert 1 / 600 < slope < 1 / 450
+    # An unorganized file is one row.
+    svs.save_cloud(tmp_path / "flat.pcd", svs.PointCloud(np.eye(3)), encoding="ascii")
+    assert svs.load_organized(tmp_path / "flat.pcd").shape == (1, 3, 3)
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        svs.load_organized(tmp_path / "missing.pcd")
+
+
 def test_load_bunny_with_normals(data_dir):
     cloud, info = svs.load_cloud_with_info(data_dir / "bun0.pcd")
     assert info.had_normals

@@ -13,11 +13,6 @@ namespace spectral_vs::detail {
 /// The argument checks of align(). @throws std::invalid_argument as align() does.
 void check_align_params(const AlignParams& params);
 
-/// The rotation of one iteration of Algorithm 1 from the correlation at the current
-/// rotation (its gradient and Hessian): Newton or gradient law, capped at
-/// params.max_rotation_step; a rotation vector, radians.
-Eigen::Vector3d align_rotation_step(const CorrelationValue& c, const AlignParams& params);
-
 /// The time limit of params.max_seconds from `start` (none for 0).
 std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
                                                   std::chrono::steady_clock::time_point start);

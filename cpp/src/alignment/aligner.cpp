@@ -4,6 +4,7 @@
 #include <spectral_vs/rotation/so3_correlation.hpp>
 #include <spectral_vs/rotation/so3_search.hpp>
 
+#include "alignment/algorithm1.hpp"
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
@@ -103,19 +104,6 @@ class MovingModel : public detail::MovingModel {
   }
 };
 
-Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params) {
-  Eigen::Vector3d omega = params.rotation_gain * c.gradient;
-  if (params.rotation_step == RotationStep::newton) {
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(c.hessian);
-    if (eigen.eigenvalues().maxCoeff() < 0.0) {
-      omega = -params.rotation_gain * c.hessian.ldlt().solve(c.gradient);
-    }
-  }
-  const double angle = omega.norm();
-  if (angle > params.max_rotation_step) omega *= params.max_rotation_step / angle;
-  return omega;
-}
-
 Eigen::AlignedBox3d box_of(const Points& points) {
   return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(),
                              points.colwise().maxCoeff().transpose());
@@ -164,64 +152,52 @@ void place_window(const Problem& problem, std::optional<TranslationWindow>& wind
                  problem.params.limits);
 }
 
-// Algorithm 1 (eq. 16-17) from `pose` until the stop rule or `max_iterations`. The
-// translation comes from `window`, placed here around the model, or, while given and
-// until the steps fit in a window, from `whole_scene` (the paper's mode).
-AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
-                           const ShCoefficients& scene_coefficients, Pose pose,
-                           std::optional<TranslationWindow>& window, SceneTranslation* whole_scene,
-                           int max_iterations) {
-  const AlignParams& params = problem.params;
-  const bool newton = params.rotation_step == RotationStep::newton;
-  if (!whole_scene) place_window(problem, window, problem.model.centre(pose));
-  AlignResult result;
-  for (int iteration = 0; iteration < max_iterations; ++iteration) {
-    const auto start = std::chrono::steady_clock::now();
-    const CorrelationValue c = correlation.evaluate(pose.R, newton);
-    pose.R = pose.R * exp_so3(rotation_step(c, params));
+// The paper's translation source: the grid over the whole scene until a step fits in a
+// window (the model is near), then a window that follows the model. A bounded grid
+// (max_translation) is kept throughout.
+class SceneThenWindow : public detail::TranslationSource {
+ public:
+  SceneThenWindow(const Problem& problem, SceneTranslation& scene,
+                  std::optional<TranslationWindow>& window)
+      : problem_(problem), scene_(scene), window_(window) {}
 
-    const Points& moved = problem.model.move(pose);
-    const TranslationEstimate shift =
-        whole_scene ? whole_scene->estimate(moved) : window->estimate(moved);
-    const Eigen::Vector3d step = params.translation_gain * shift.shift;
-    pose.offset += step;
-
-    AlignIteration record;
-    record.seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    record.translation_step = step.norm() / params.voxel_size;
-    record.rotation_gradient = c.gradient.norm();
-    record.correlation = c.value;
-    record.translation_peak = shift.peak;
-    record.translation_cost =
-        whole_scene ? whole_scene->translation_cost() : window->translation_cost();
-    record.rotation_cost = rotation_cost(scene_coefficients, problem.model_coefficients, pose.R,
-                                         params.bandwidth, true);
-    record.T_scene_model = problem.model.transform_of(pose);
-    result.history.push_back(record);
-    result.iterations = iteration + 1;
-    if (record.translation_step + record.rotation_gradient < params.tolerance) {
-      result.converged = true;
-      result.stop_reason = AlignStopReason::converged;
-      break;
-    }
-    if (expired(problem)) {
-      result.stop_reason = AlignStopReason::max_seconds;
-      break;
-    }
-    if (!whole_scene) {
-      window->follow(problem.model.centre(pose));
-    } else if (params.max_translation == 0.0 && iteration + 1 < max_iterations &&
-               step.norm() < 0.5 * problem.margin) {
-      place_window(problem, window, problem.model.centre(pose));  // near: go local
-      whole_scene = nullptr;
+  TranslationEstimate estimate(const Points& moved) override {
+    return on_window_ ? window_->estimate(moved) : scene_.estimate(moved);
+  }
+  double translation_cost() const override {
+    return on_window_ ? window_->translation_cost() : scene_.translation_cost();
+  }
+  void follow(const Eigen::Vector3d& centre, const Eigen::Vector3d& step, bool more) override {
+    if (on_window_) {
+      window_->follow(centre);
+    } else if (problem_.params.max_translation == 0.0 && more &&
+               step.norm() < 0.5 * problem_.margin) {
+      place_window(problem_, window_, centre);  // near: go local
+      on_window_ = true;
     }
   }
-  result.T_scene_model = problem.model.transform_of(pose);
-  result.fitness = problem.model.fitness(problem.scene, problem.view, pose, params.voxel_size);
-  result.correlation = correlation.evaluate(pose.R).value;
-  result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
-  if (!whole_scene) result.window_dims = window->dims();
+  std::optional<Eigen::Vector3i> window_dims() const override {
+    return on_window_ ? std::optional<Eigen::Vector3i>(window_->dims()) : std::nullopt;
+  }
+
+ private:
+  const Problem& problem_;
+  SceneTranslation& scene_;
+  std::optional<TranslationWindow>& window_;
+  bool on_window_ = false;
+};
+
+// Algorithm 1 (eq. 16-17) from `pose` with the translation from `source`, and the
+// fitness of where it ends.
+AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
+                           const ShCoefficients& scene_coefficients, Pose pose,
+                           detail::TranslationSource& source, int max_iterations) {
+  const detail::Algorithm1Problem loop{correlation, scene_coefficients,
+                                       problem.model_coefficients, problem.model, problem.params,
+                                       problem.deadline};
+  AlignResult result = detail::run_algorithm1(loop, pose, source, max_iterations);
+  result.fitness =
+      problem.model.fitness(problem.scene, problem.view, pose, problem.params.voxel_size);
   return result;
 }
 
@@ -494,8 +470,9 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   }
   So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
   const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
-  AlignResult result = run_algorithm1(problem, correlation, coefficients, hypothesis.pose, window,
-                                      nullptr, problem.params.refinement_iterations);
+  place_window(problem, window, problem.model.centre(hypothesis.pose));
+  AlignResult result = run_algorithm1(problem, correlation, coefficients, hypothesis.pose, *window,
+                                      problem.params.refinement_iterations);
   result.hypothesis = hypothesis.index;
   // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
   // walk off a right hypothesis: the fitter of the two poses is kept.
@@ -623,10 +600,6 @@ namespace detail {
 
 void check_align_params(const AlignParams& params) { check_params(params); }
 
-Eigen::Vector3d align_rotation_step(const CorrelationValue& c, const AlignParams& params) {
-  return rotation_step(c, params);
-}
-
 std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
                                                   std::chrono::steady_clock::time_point start) {
   using Clock = std::chrono::steady_clock;
@@ -685,7 +658,8 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
             : SceneTranslation(scene_map, moving.centre(start), moving.reach(), params.voxel_size,
                                params.occupancy, phase_params(params), params.limits);
     std::optional<TranslationWindow> window;
-    return run_algorithm1(problem, correlation, scene_coefficients, start, window, &whole_scene,
+    SceneThenWindow source(problem, whole_scene, window);
+    return run_algorithm1(problem, correlation, scene_coefficients, start, source,
                           params.max_iterations);
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);

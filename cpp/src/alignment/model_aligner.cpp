@@ -4,6 +4,7 @@
 #include <spectral_vs/rotation/so3_correlation.hpp>
 #include <spectral_vs/translation/phase_correlation.hpp>
 
+#include "alignment/algorithm1.hpp"
 #include "alignment/align_detail.hpp"
 #include "alignment/fitness_map.hpp"
 #include "alignment/moving_model.hpp"
@@ -80,11 +81,31 @@ struct ModelAligner::Impl {
     return spec;
   }
 
-  // Algorithm 1 (eq. 16-17) on the bounded grid: run_algorithm1 of align() with the
-  // translation over the whole scene.
+  // The bounded grid placed around the model's start, as Algorithm 1's translation source.
+  class BoundedGrid : public detail::TranslationSource {
+   public:
+    BoundedGrid(Impl& impl, const GridSpec& spec)
+        : impl_(impl), spec_(spec), target_energy_(grid_energy(impl.target)) {}
+    TranslationEstimate estimate(const Points& moved) override {
+      const AlignParams& p = impl_.params;
+      voxelize_into(moved, spec_, p.occupancy, impl_.moving, p.limits);
+      if (impl_.moving.empty()) fail("initial_guess: the model falls outside the scene's grid");
+      return impl_.phase->estimate(impl_.moving, impl_.max_shift);
+    }
+    double translation_cost() const override {
+      return spectral_vs::translation_cost(impl_.moving, impl_.target, Eigen::Vector3i::Zero(),
+                                           target_energy_);
+    }
+
+   private:
+    Impl& impl_;
+    GridSpec spec_;
+    double target_energy_;
+  };
+
+  // Algorithm 1 (eq. 16-17) on the bounded grid: the loop of align().
   AlignResult run(const PointCloud& scene, const Transform& initial_guess,
                   Clock::time_point started) {
-    const Clock::time_point deadline = detail::deadline_of(params, started);
     auto t = Clock::now();
     const ShCoefficients scene_coefficients =
         egi_coefficients(scene, params.bandwidth, params.egi_method);
@@ -96,56 +117,20 @@ struct ModelAligner::Impl {
 
     t = Clock::now();
     Pose pose = pose_of(initial_guess);
-    const GridSpec spec = place_grid(scene, pose);
-    const double target_energy = grid_energy(target);
+    BoundedGrid grid(*this, place_grid(scene, pose));
     timings.translation_grid = seconds_since(t);
 
-    const bool newton = params.rotation_step == RotationStep::newton;
-    AlignResult result;
-    for (int iteration = 0; iteration < params.max_iterations; ++iteration) {
-      const auto start = Clock::now();
-      const CorrelationValue c = correlation.evaluate(pose.R, newton);
-      pose.R = pose.R * exp_so3(detail::align_rotation_step(c, params));
-      const auto rotated = Clock::now();
-      timings.rotation += std::chrono::duration<double>(rotated - start).count();
-
-      voxelize_into(move(pose), spec, params.occupancy, moving, params.limits);
-      if (moving.empty()) fail("initial_guess: the model falls outside the scene's grid");
-      const TranslationEstimate shift = phase->estimate(moving, max_shift);
-      const Eigen::Vector3d step = params.translation_gain * shift.shift;
-      pose.offset += step;
-
-      AlignIteration record;
-      const auto translated = Clock::now();
-      timings.translation += std::chrono::duration<double>(translated - rotated).count();
-      record.seconds = std::chrono::duration<double>(translated - start).count();
-      record.translation_step = step.norm() / params.voxel_size;
-      record.rotation_gradient = c.gradient.norm();
-      record.correlation = c.value;
-      record.translation_peak = shift.peak;
-      record.translation_cost =
-          translation_cost(moving, target, Eigen::Vector3i::Zero(), target_energy);
-      record.rotation_cost =
-          rotation_cost(scene_coefficients, model_coefficients, pose.R, params.bandwidth, true);
-      record.T_scene_model = transform_of(pose);
-      result.history.push_back(record);
-      result.iterations = iteration + 1;
-      timings.records += seconds_since(translated);
-      if (record.translation_step + record.rotation_gradient < params.tolerance) {
-        result.converged = true;
-        result.stop_reason = AlignStopReason::converged;
-        break;
-      }
-      if (Clock::now() > deadline) {
-        result.stop_reason = AlignStopReason::max_seconds;
-        break;
-      }
-    }
+    const detail::Algorithm1Problem loop{correlation,     scene_coefficients,
+                                         model_coefficients, *moving_model,
+                                         params,          detail::deadline_of(params, started)};
+    detail::Algorithm1Timings loop_timings;
+    AlignResult result = detail::run_algorithm1(loop, pose, grid, params.max_iterations,
+                                                &loop_timings);
+    timings.rotation = loop_timings.rotation;
+    timings.translation = loop_timings.translation;
+    timings.records = loop_timings.records;
     t = Clock::now();
-    result.T_scene_model = transform_of(pose);
     result.fitness = fitness(scene, map, pose);
-    result.correlation = correlation.evaluate(pose.R).value;
-    result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
     timings.fitness = seconds_since(t);
     return result;
   }

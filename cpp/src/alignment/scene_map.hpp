@@ -6,6 +6,8 @@
 #include <spectral_vs/representation/voxel_grid.hpp>
 #include <spectral_vs/translation/phase_correlation.hpp>
 
+#include "alignment/algorithm1.hpp"
+
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <optional>
@@ -71,7 +73,7 @@ class SceneMap {
 /// A cubic window of the scene around the model, on a grid only as large as the window:
 /// the shift is bounded by the margin, which keeps the small grid free of wrap-around.
 /// Re-placed (the scene re-voxelized and transformed) when the model leaves its centre.
-class TranslationWindow {
+class TranslationWindow : public TranslationSource {
  public:
   /// A window of half-width `reach + margin` metres, placed around `centre`.
   TranslationWindow(const SceneMap& scene, double reach, double margin,
@@ -84,8 +86,13 @@ class TranslationWindow {
   void follow(const Eigen::Vector3d& centre);
 
   /// The shift of `moved` (model points in the scene) onto the scene, and J_t.
-  TranslationEstimate estimate(const Points& moved);
-  double translation_cost() const;
+  TranslationEstimate estimate(const Points& moved) override;
+  double translation_cost() const override;
+  /// As Algorithm 1's source: follows the model's centre.
+  void follow(const Eigen::Vector3d& centre, const Eigen::Vector3d&, bool) override {
+    follow(centre);
+  }
+  std::optional<Eigen::Vector3i> window_dims() const override { return spec_.dims; }
   /// Normalised correlation of `moved`'s grid with the scene's at zero shift, in [0, 1]:
   /// smooth in sub-voxel motions, with trilinear voxels.
   double overlap(const Points& moved);
@@ -111,7 +118,7 @@ class TranslationWindow {
 /// reach (the model may end anywhere in it) and the model's hull where it starts, with
 /// room against wrap-around. At a coarse voxel it places the hypotheses of the global
 /// search; at the alignment's voxel it is the paper's translation step.
-class SceneTranslation {
+class SceneTranslation : public TranslationSource {
  public:
   SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start, double reach,
                    double voxel_size, Occupancy occupancy, const PhaseCorrelationParams& params,
@@ -126,8 +133,8 @@ class SceneTranslation {
                    double max_translation, double voxel_size, Occupancy occupancy,
                    const PhaseCorrelationParams& params, const GridLimits& limits);
 
-  TranslationEstimate estimate(const Points& moved);
-  double translation_cost() const;
+  TranslationEstimate estimate(const Points& moved) override;
+  double translation_cost() const override;
   const GridSpec& spec() const { return spec_; }
 
  private:

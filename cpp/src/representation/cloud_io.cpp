@@ -317,7 +317,15 @@ Points extract(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointField* field
 
 }  // namespace
 
-PointCloud load_cloud(const std::string& path, CloudFileInfo* info) {
+namespace {
+
+// A file's points (and normals, if it has them) in its order, non-finite values kept.
+struct FileContents {
+  Points points, normals;
+  CloudFileInfo info;
+};
+
+FileContents read_file(const std::string& path) {
   const Format format = format_from_extension(path);
   check_header(path, format);
   pcl::PCLPointCloud2 cloud;
@@ -341,23 +349,40 @@ PointCloud load_cloud(const std::string& path, CloudFileInfo* info) {
   if (!xyz[0] || !xyz[1] || !xyz[2]) {
     fail("path: ", path, " has no x, y, z fields");
   }
-  Points points = extract(cloud, xyz, path);
+  FileContents contents;
+  contents.points = extract(cloud, xyz, path);
   const pcl::PCLPointField* normal[3] = {
       find_field(cloud, "normal_x"), find_field(cloud, "normal_y"), find_field(cloud, "normal_z")};
-  const bool had_normals = normal[0] && normal[1] && normal[2];
-  Points normals = had_normals ? extract(cloud, normal, path) : Points();
+  contents.info.had_normals = normal[0] && normal[1] && normal[2];
+  if (contents.info.had_normals) contents.normals = extract(cloud, normal, path);
+  contents.info.width = cloud.width;
+  contents.info.height = cloud.height;
+  contents.info.points_in_file = static_cast<std::size_t>(contents.points.rows());
+  return contents;
+}
 
-  CloudFileInfo file_info;
-  file_info.width = cloud.width;
-  file_info.height = cloud.height;
-  file_info.points_in_file = static_cast<std::size_t>(points.rows());
-  file_info.had_normals = had_normals;
-  file_info.non_finite_dropped = remove_non_finite(points, had_normals ? &normals : nullptr);
-  if (points.rows() == 0) {
-    fail("path: ", path, " holds no finite point (", file_info.points_in_file, " in the file)");
+}  // namespace
+
+PointCloud load_cloud(const std::string& path, CloudFileInfo* info) {
+  FileContents file = read_file(path);
+  file.info.non_finite_dropped =
+      remove_non_finite(file.points, file.info.had_normals ? &file.normals : nullptr);
+  if (file.points.rows() == 0) {
+    fail("path: ", path, " holds no finite point (", file.info.points_in_file, " in the file)");
   }
-  if (info) *info = file_info;
-  return PointCloud(std::move(points), std::move(normals));
+  if (info) *info = file.info;
+  return PointCloud(std::move(file.points), std::move(file.normals));
+}
+
+Points load_points(const std::string& path, CloudFileInfo* info) {
+  FileContents file = read_file(path);
+  const bool any_finite = file.points.array().isFinite().rowwise().all().any();
+  file.info.non_finite_dropped = 0;
+  if (!any_finite) {
+    fail("path: ", path, " holds no finite point (", file.info.points_in_file, " in the file)");
+  }
+  if (info) *info = file.info;
+  return std::move(file.points);
 }
 
 void save_cloud(const std::string& path, const PointCloud& cloud, PcdEncoding encoding) {

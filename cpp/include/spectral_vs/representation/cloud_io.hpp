@@ -27,6 +27,12 @@ enum class PcdEncoding { ascii, binary, binary_compressed };
 ///         no x/y/z fields, or holds no finite point.
 PointCloud load_cloud(const std::string& path, CloudFileInfo* info = nullptr);
 
+/// The points of a `.pcd` or `.ply` file in the file's order, non-finite ones kept (NaN
+/// where a depth camera had no return): row `v * info.width + u` of an organized cloud is
+/// its pixel (row v, column u). Normals are not read; `info.non_finite_dropped` is 0.
+/// @throws std::invalid_argument as `load_cloud`.
+Points load_points(const std::string& path, CloudFileInfo* info = nullptr);
+
 /// Saves to `.pcd` or `.ply` (chosen by extension) as float32 fields x y z
 /// [normal_x normal_y normal_z]: the layout other point cloud tools read.
 /// @throws std::invalid_argument for an unknown extension or an unwritable path.

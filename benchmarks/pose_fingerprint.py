@@ -1,0 +1,82 @@
+"""Bit-for-bit fingerprints of the aligner's poses, to check that a change of structure
+changes no result.
+
+Runs ``align`` in its two modes (the global search with the scan's viewpoint, and the
+paper's gradient ascent) and the servo's prepared reference (``ModelAligner`` with a
+bounded translation) on seeded cases of every family of ``benchmarks/cases.py``, and
+writes each returned ``T_scene_model`` as the hexadecimal form of its 16 doubles::
+
+    python benchmarks/pose_fingerprint.py --output before.json      # on the old code
+    python benchmarks/pose_fingerprint.py --compare before.json     # on the new code
+
+``--compare`` exits with 1 and names the cases whose poses differ in any bit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import spectral_vs as svs
+from spectral_vs._core import ModelAligner
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import cases as case_lib  # noqa: E402
+
+ANGLES = (30.0, 120.0)
+
+
+def fingerprint(T: np.ndarray) -> list[str]:
+    return [float(v).hex() for v in np.asarray(T, dtype=float).ravel()]
+
+
+def poses(cases_per_cell: int) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for spec in case_lib.case_specs(case_lib.FAMILIES, ANGLES, cases_per_cell):
+        case = case_lib.make_case(spec)
+        model, scene = case.model_cloud(), case.scene_cloud()
+        single_view = bool(np.all(np.isfinite(case.viewpoint)))
+        ours = {"scene_viewpoint": case.viewpoint} if single_view else {}
+        out[f"{spec.case_id}/ours"] = fingerprint(svs.align(model, scene, **ours).T_scene_model)
+        paper = svs.align(model, scene, global_search=False, max_iterations=30)
+        out[f"{spec.case_id}/paper"] = fingerprint(paper.T_scene_model)
+        # The servo's registration: the reference prepared once, a bounded translation.
+        params = svs.AlignParams()
+        params.global_search = False
+        params.max_translation = 0.1
+        params.max_iterations = 10
+        aligner = ModelAligner(svs.voxel_downsample(model, 0.004), params)
+        bounded = aligner.align(svs.voxel_downsample(scene, 0.004), case.T_true)
+        out[f"{spec.case_id}/bounded"] = fingerprint(bounded.T_scene_model)
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases-per-cell", type=int, default=2)
+    parser.add_argument("--output", type=Path, help="write the fingerprints here")
+    parser.add_argument("--compare", type=Path, help="compare with fingerprints written before")
+    args = parser.parse_args()
+    current = poses(args.cases_per_cell)
+    if args.output:
+        args.output.write_text(json.dumps(current, indent=1))
+    print(f"{len(current)} poses")
+    if args.compare:
+        before = json.loads(args.compare.read_text())
+        changed = sorted(k for k in before if before[k] != current.get(k))
+        missing = sorted(set(before) ^ set(current))
+        for key in changed:
+            print(f"differs: {key}")
+        if missing:
+            print(f"not in both: {missing}")
+        print(f"{len(before) - len(changed)} of {len(before)} poses bit-identical")
+        return 1 if changed or missing else 0
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,83 @@
+#include "alignment/algorithm1.hpp"
+
+#include <spectral_vs/rotation/so3.hpp>
+
+#include <Eigen/Dense>
+
+namespace spectral_vs::detail {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_between(Clock::time_point from, Clock::time_point to) {
+  return std::chrono::duration<double>(to - from).count();
+}
+
+}  // namespace
+
+Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params) {
+  Eigen::Vector3d omega = params.rotation_gain * c.gradient;
+  if (params.rotation_step == RotationStep::newton) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(c.hessian);
+    if (eigen.eigenvalues().maxCoeff() < 0.0) {
+      omega = -params.rotation_gain * c.hessian.ldlt().solve(c.gradient);
+    }
+  }
+  const double angle = omega.norm();
+  if (angle > params.max_rotation_step) omega *= params.max_rotation_step / angle;
+  return omega;
+}
+
+AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
+                           int max_iterations, Algorithm1Timings* timings) {
+  const AlignParams& params = problem.params;
+  const bool newton = params.rotation_step == RotationStep::newton;
+  AlignResult result;
+  for (int iteration = 0; iteration < max_iterations; ++iteration) {
+    const auto start = Clock::now();
+    const CorrelationValue c = problem.correlation.evaluate(pose.R, newton);
+    pose.R = pose.R * exp_so3(rotation_step(c, params));
+    const auto rotated = Clock::now();
+
+    const TranslationEstimate shift = source.estimate(problem.model.move(pose));
+    const Eigen::Vector3d step = params.translation_gain * shift.shift;
+    pose.offset += step;
+    const auto translated = Clock::now();
+
+    AlignIteration record;
+    record.seconds = seconds_between(start, translated);
+    record.translation_step = step.norm() / params.voxel_size;
+    record.rotation_gradient = c.gradient.norm();
+    record.correlation = c.value;
+    record.translation_peak = shift.peak;
+    record.translation_cost = source.translation_cost();
+    record.rotation_cost = rotation_cost(problem.scene_coefficients, problem.model_coefficients,
+                                         pose.R, params.bandwidth, true);
+    record.T_scene_model = problem.model.transform_of(pose);
+    result.history.push_back(record);
+    result.iterations = iteration + 1;
+    if (timings) {
+      timings->rotation += seconds_between(start, rotated);
+      timings->translation += seconds_between(rotated, translated);
+      timings->records += seconds_between(translated, Clock::now());
+    }
+    if (record.translation_step + record.rotation_gradient < params.tolerance) {
+      result.converged = true;
+      result.stop_reason = AlignStopReason::converged;
+      break;
+    }
+    if (Clock::now() > problem.deadline) {
+      result.stop_reason = AlignStopReason::max_seconds;
+      break;
+    }
+    source.follow(problem.model.centre(pose), step, iteration + 1 < max_iterations);
+  }
+  result.T_scene_model = problem.model.transform_of(pose);
+  result.correlation = problem.correlation.evaluate(pose.R).value;
+  result.translation_peak = result.history.empty() ? 0.0 : result.history.back().translation_peak;
+  if (const auto dims = source.window_dims()) result.window_dims = *dims;
+  return result;
+}
+
+}  // namespace spectral_vs::detail
