@@ -14,9 +14,9 @@ APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev
 	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev
 PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
 PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" "matplotlib>=3.7" ruff mypy
-PIP_BENCH := "open3d>=0.19" "small_gicp>=1.0"  # the `bench` extra of pyproject.toml
+PIP_BENCH := "open3d>=0.19" "small_gicp>=1.0" "kiss-matcher>=1.0"  # the `bench` extra of pyproject.toml
 
-.PHONY: all demo test test-cpp test-python test-sanitize install system-deps venv bench bench-peers bench-servo-peers experiments \
+.PHONY: all demo test test-cpp test-python test-sanitize install system-deps venv bench bench-peers bench-servo-peers bench-views experiments \
 	format lint clean
 
 all: install
@@ -89,6 +89,14 @@ bench-peers: install
 bench-servo-peers: install
 	$(PY) -m pip install -q $(PIP_BENCH)
 	$(PY) benchmarks/servo_peers.py
+
+# Scene-to-scene registration on view pairs of the real scans and of the simulation: ours
+# (when the library has `align_views`) against Open3D ICP, FPFH + RANSAC + ICP and
+# KISS-Matcher + ICP (about 6 minutes on 2 cores): benchmarks/results/view_pairs.json,
+# docs/benchmarks.md.
+bench-views: install
+	$(PY) -m pip install -q $(PIP_BENCH)
+	OMP_NUM_THREADS=1 SPECTRAL_VS_DATA=$(DATA) $(PY) benchmarks/view_pairs_benchmark.py
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks

@@ -394,3 +394,73 @@ def register(
     else:
         T = _run_small_gicp(method, problem)
     return PeerResult(T, time.perf_counter() - start, time.process_time() - cpu_start)
+
+
+#: KISS-Matcher's voxel at its own (LiDAR) scale: the points are scaled by
+#: ``KISS_MATCHER_VOXEL / v`` before it runs (its constructor refuses a voxel under 5 mm and
+#: its constants assume metre-scale voxels), and its translation is scaled back.
+KISS_MATCHER_VOXEL = 0.3
+
+
+def register_kiss_matcher(
+    source_xyz: np.ndarray,
+    source_normals: np.ndarray,
+    target_xyz: np.ndarray,
+    target_normals: np.ndarray,
+    voxel: float,
+    *,
+    settings: PeerSettings | None = None,
+) -> tuple[PeerResult, bool]:
+    """KISS-Matcher (PyPI ``kiss-matcher``, Lim et al., ICRA 2025), then Open3D
+    point-to-plane ICP: ``T_target_source`` and whether KISS-Matcher called its estimate
+    valid.
+
+    KISS-Matcher takes points only (it estimates its own normals and features) and runs
+    with its defaults at :data:`KISS_MATCHER_VOXEL` on the points scaled by
+    ``KISS_MATCHER_VOXEL / voxel``; its translation is scaled back. The refinement is the
+    one after RANSAC in :func:`register`: point-to-plane ICP within
+    ``settings.refine_distance_voxels * voxel`` on the clouds as given (with their
+    normals), ``settings.refine_max_iterations`` iterations, from KISS-Matcher's estimate
+    whether valid or not. The time covers the whole call, scaling included.
+
+    Parameters
+    ----------
+    source_xyz, source_normals : ndarray, shape (N, 3)
+        The cloud to move (metres, unit normals).
+    target_xyz, target_normals : ndarray, shape (M, 3)
+        The fixed cloud.
+    voxel : float
+        The voxel size ``v``, metres.
+    settings : PeerSettings, optional
+        The refinement's settings; defaults to ``PeerSettings()``.
+
+    Returns
+    -------
+    (PeerResult, bool)
+        ``T_scene_model`` (here ``T_target_source``) with the times, and KISS-Matcher's
+        ``valid``.
+    """
+    from kiss_matcher import KISSMatcher, KISSMatcherConfig  # type: ignore[import-untyped]
+
+    s = settings or PeerSettings()
+    start, cpu_start = time.perf_counter(), time.process_time()
+    scale = KISS_MATCHER_VOXEL / voxel
+    matcher = KISSMatcher(KISSMatcherConfig(KISS_MATCHER_VOXEL))
+    solution = matcher.estimate(
+        (np.asarray(source_xyz) * scale).astype(np.float32),
+        (np.asarray(target_xyz) * scale).astype(np.float32),
+    )
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(solution.rotation)
+    T[:3, 3] = np.asarray(solution.translation).ravel() / scale
+    o3d = _open3d()
+    T = _o3d_plane_icp(
+        o3d,
+        _o3d_cloud(o3d, source_xyz, source_normals),
+        _o3d_cloud(o3d, target_xyz, target_normals),
+        T,
+        s.refine_distance_voxels * voxel,
+        s.refine_max_iterations,
+    )
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    return PeerResult(T, seconds, cpu), bool(solution.valid)

@@ -2,8 +2,11 @@
 
 Both controllers here have the interface of :class:`~spectral_vs.servo.SpectralServo`
 (``reset()``, ``step(current) -> (twist, status)``, ``step_record(current,
-T_previous_current) -> (twist, status, record)``), so :func:`~spectral_vs.servo.run_servo`
-drives them unchanged, and they fill the same :class:`~spectral_vs.servo.ServoRecord`.
+T_previous_current, *, now, stamp) -> (twist, status, record)``), so
+:func:`~spectral_vs.servo.run_servo` drives them unchanged, and they fill the same
+:class:`~spectral_vs.servo.ServoRecord`. They do not ride sensor faults: ``now`` and
+``stamp`` are accepted and not used, and an input with too little in it stops them at once
+(``"empty_cloud"``, ``"too_few_points"``).
 The twist is the camera velocity ``(v, omega)`` in the current camera frame, m/s and rad/s,
 as :meth:`Kinematics.joint_velocities` takes it.
 
@@ -420,9 +423,15 @@ class DenseDepthServo:
         return twist, status
 
     def step_record(
-        self, current: np.ndarray | PointCloud, T_previous_current: np.ndarray | None = None
+        self,
+        current: np.ndarray | PointCloud,
+        T_previous_current: np.ndarray | None = None,
+        *,
+        now: float | None = None,
+        stamp: float | None = None,
     ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
-        """:meth:`step` with its :class:`ServoRecord`."""
+        """:meth:`step` with its :class:`ServoRecord` (``now`` and ``stamp``: the interface
+        of :meth:`SpectralServo.step_record`, not used)."""
         start = time.perf_counter()
         p = self.params
         depth = self._depth(current, "current")
@@ -759,10 +768,16 @@ class RegistrationServo:
         return twist, status
 
     def step_record(
-        self, current: PointCloud | np.ndarray, T_previous_current: np.ndarray | None = None
+        self,
+        current: PointCloud | np.ndarray,
+        T_previous_current: np.ndarray | None = None,
+        *,
+        now: float | None = None,
+        stamp: float | None = None,
     ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
         """:meth:`step` with its :class:`ServoRecord` (``iterations`` is not reported by
-        Open3D and stays 0)."""
+        Open3D and stays 0; ``now`` and ``stamp``: the interface of
+        :meth:`SpectralServo.step_record`, not used)."""
         start = time.perf_counter()
         p = self.params
         points, normals = self._crop(current, "current")

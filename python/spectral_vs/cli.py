@@ -599,7 +599,7 @@ def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any)
 
 
 def run_servo_sim(args: argparse.Namespace) -> int:
-    """Servo the simulated iiwa from seeded starts back to the reference pose."""
+    """Servo the simulated arm (--robot) from seeded starts back to the reference pose."""
     from spectral_vs import servo as servo_lib
 
     try:
@@ -608,7 +608,11 @@ def run_servo_sim(args: argparse.Namespace) -> int:
         raise InputError(f"servo-sim: {error}") from error
     plotting = None if args.no_figures else _plotting("--out")
     noise = sim.DepthNoise.kinect(seed=args.seed) if args.noise else sim.DepthNoise()
-    sim_params = sim.SimParams(mode=args.sim_mode, camera=sim.CameraParams(noise=noise))
+    sim_params = sim.SimParams(
+        mode=args.sim_mode,
+        robot=sim.robot_model(args.robot),
+        camera=sim.CameraParams(noise=noise),
+    )
     params = servo_lib.ServoParams(mode=args.mode, warm_start=args.warm_start)
     talk = not (args.json or args.quiet)
     per_step = talk and args.starts == 1
@@ -616,7 +620,12 @@ def run_servo_sim(args: argparse.Namespace) -> int:
     with sim.PyBulletRobot(sim_params) as robot:
         reference = robot.capture()
         T_world_reference = robot.camera_pose()
-        starts = servo_lib.start_poses(robot.kinematics, args.set, args.starts, args.seed)
+        home_q = sim_params.robot.home_q
+        spec = servo_lib.START_SETS[args.set]
+        accept = robot.view_check(spec["min_view_share"]) if "min_view_share" in spec else None
+        starts = servo_lib.start_poses(
+            robot.kinematics, args.set, args.starts, args.seed, q_reference=home_q, accept=accept
+        )
 
         def progress(record: servo_lib.ServoRecord) -> None:
             print(_servo_step_line(record, T_world_reference, servo_lib), flush=True)
@@ -624,7 +633,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
         if talk:
             warm = ", warm-started" if args.warm_start else ""
             print(
-                f"reference captured at HOME_Q ({len(reference)} points); "
+                f"{args.robot}: reference captured at home ({len(reference)} points); "
                 f"{_count(args.starts, 'start')} of the {args.set} set (seed {args.seed}); "
                 f"'{args.mode}' estimate{warm}, {args.sim_mode} simulation"
                 f"{', depth noise' if args.noise else ''}, control period {args.dt:g} s, "
@@ -680,7 +689,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                     path,
                     reference=reference,
                     clouds=dict(enumerate(recorder.clouds)),
-                    title=f"servo-sim: {args.set} start {index}, seed {args.seed}, "
+                    title=f"servo-sim: {args.robot}, {args.set} start {index}, seed {args.seed}, "
                     f"'{args.mode}' estimate",
                 )
                 if talk:
@@ -688,6 +697,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
     successes = sum(run["success"] for run in runs)
     if args.json:
         summary = {
+            "robot": args.robot,
             "set": args.set,
             "seed": args.seed,
             "mode": args.mode,
@@ -986,9 +996,9 @@ def build_parser() -> argparse.ArgumentParser:
         aliases=["servo-demo"],
         help="servo a simulated robot arm's camera back to a reference pose (needs pybullet)",
         description="The paper's robot experiment in PyBullet: capture the reference cloud at "
-        "the home pose, move every joint of the iiwa to seeded random starts, then servo the "
-        "wrist camera back with spectral_vs.servo, printing every step (one start) or one line "
-        "per start, and the final error against the simulation's ground truth. Writes "
+        "the home pose, move every joint of the arm (--robot) to seeded random starts, then "
+        "servo the wrist camera back with spectral_vs.servo, printing every step (one start) "
+        "or one line per start, and the final error against the simulation's ground truth. Writes "
         "servo.png (errors over time, camera path, clouds over the reference; servo_<i>.png "
         "for several starts) to --out. Exit code 1 when a final error exceeds "
         f"{MAX_SERVO_ERROR_MM:g} mm or {MAX_SERVO_ERROR_DEG:g} degree.",
@@ -1002,11 +1012,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="random start poses (default: 1)",
     )
     servo.add_argument(
+        "--robot",
+        choices=["iiwa", "panda"],  # the keys of sim.ROBOT_MODELS (test_cli checks)
+        default="iiwa",
+        help="the arm: KUKA LBR iiwa (default) or Franka Emika Panda, both with the camera "
+        "0.55 m above the table at home",
+    )
+    servo.add_argument(
         "--set",
-        choices=["moderate", "large"],
+        choices=["moderate", "large", "extreme"],  # the keys of servo.START_SETS
         default="moderate",
-        help="starts under 0.2 m and 30 deg away (moderate, default) or beyond, up to 0.45 m "
-        "and 60 deg (large)",
+        help="starts under 0.2 m and 30 deg away (moderate, default), beyond that up to "
+        "0.45 m and 60 deg (large), or beyond that up to 0.6 m and 90 deg with at least 30%% "
+        "of the reference still in view and the camera above the table (extreme)",
     )
     servo.add_argument(
         "--mode",

@@ -24,6 +24,10 @@ class RobotInterface(Protocol):
     robot's URDF (rad, or m for prismatic joints). Point clouds are in the camera frame
     (Z forward, X right, Y down, metres) that the kinematics' ``T_tip_camera`` places on
     the tip link.
+
+    Optional, outside the protocol: ``capture_stamp() -> float``, the sensor driver's time
+    stamp of the last capture, s. :func:`spectral_vs.servo.run_servo` passes it to the
+    servo, which holds on a stamp that does not advance (a stale frame).
     """
 
     def joint_positions(self) -> np.ndarray:

@@ -392,19 +392,36 @@ def test_loop_converges_and_stops_the_robot(scene, desired):
     assert np.all(np.linalg.norm(log.array("twist")[:, :3], axis=1) <= 0.1 + 1e-12)
 
 
-def test_empty_cloud_stops_before_any_motion(scene, desired):
+def test_empty_cloud_from_the_start_never_moves_and_stops_after_max_outage(scene, desired):
+    """The camera never sees anything: every step holds with zero joint velocities, and
+    once the outage exceeds max_outage (0.5 s: the steps at 0, 0.1, ..., 0.6 s) the run
+    stops with "sensor_outage"; with max_outage = 0 it stops at the first step."""
     robot = FreeCamera(scene, camera_pose((0.02, 0.0, 0.0)), empty_at=0)
     log = run_servo(robot, FreeCameraKinematics(), SpectralServo(view(scene, desired)), dt=0.1)
-    assert log.reason == "empty_cloud" and log.status.state == "stopped"
-    assert robot.sent == [] and robot.stops == 1
-    assert len(log.records) == 1 and np.all(log.records[0].twist == 0)
+    assert log.reason == "sensor_outage" and log.status.state == "stopped"
+    assert "empty_cloud" in log.status.message
+    assert len(log.records) == 7 and len(robot.sent) == 6 and robot.stops == 1
+    assert all(not q_dot.any() for q_dot in robot.sent)
+    assert [record.hold for record in log.records] == ["empty_cloud"] * 7
+    assert log.array("outage") == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    robot = FreeCamera(scene, camera_pose((0.02, 0.0, 0.0)), empty_at=0)
+    servo = SpectralServo(view(scene, desired), ServoParams(max_outage=0.0))
+    log = run_servo(robot, FreeCameraKinematics(), servo, dt=0.1)
+    assert log.reason == "sensor_outage" and robot.sent == [] and len(log.records) == 1
 
 
-def test_too_few_points_stops(scene, desired):
-    servo = SpectralServo(view(scene, desired), ServoParams(min_points=500))
-    twist, status = servo.step(view(scene, desired).points[:100])
-    assert status.state == "stopped" and status.reason == "too_few_points"
-    assert np.all(twist == 0)
+def test_too_few_points_holds(scene, desired):
+    """Fewer than min_points: a zero twist, the servo still running (the record says why),
+    until the fault has lasted longer than max_outage."""
+    servo = SpectralServo(view(scene, desired), ServoParams(min_points=500, max_outage=0.5))
+    few = view(scene, desired).points[:100]
+    for now in (10.0, 10.3, 10.5):
+        twist, status, record = servo.step_record(few, now=now)
+        assert status.state == "running" and record.hold == "too_few_points"
+        assert np.all(twist == 0) and "min_points 500" in status.message
+    twist, status, record = servo.step_record(few, now=10.6)
+    assert status.state == "stopped" and status.reason == "sensor_outage"
+    assert record.outage == pytest.approx(0.6) and np.all(twist == 0)
 
 
 def test_watchdog_stops_on_a_teleported_cloud(scene, desired):

@@ -1,5 +1,6 @@
-"""PyBullet simulation of the paper's servoing experiment: a KUKA LBR iiwa with a wrist
-depth camera above a table of cluttered objects.
+"""PyBullet simulation of the paper's servoing experiment: a robot arm with a wrist depth
+camera above a table of cluttered objects. The arm is data (:class:`RobotModel`): the
+presets are the KUKA LBR iiwa (the default) and the Franka Emika Panda.
 
 Needs the optional dependency ``pybullet`` (``pip install pybullet``). The main entry
 point is :class:`PyBulletRobot`, an implementation of
@@ -33,11 +34,23 @@ from spectral_vs.sim.robot import (
     iiwa_urdf_path,
     pose_matrix,
 )
+from spectral_vs.sim.robots import (
+    PANDA_HOME_Q,
+    ROBOT_MODELS,
+    RobotModel,
+    iiwa_model,
+    panda_model,
+    panda_T_hand_camera,
+    panda_urdf_path,
+    robot_model,
+)
 from spectral_vs.sim.scene import TABLE_HEIGHT, PlacedObject, SceneParams, build_scene
 
 __all__ = [
     "BASE_LINK",
     "HOME_Q",
+    "PANDA_HOME_Q",
+    "ROBOT_MODELS",
     "TABLE_HEIGHT",
     "TIP_LINK",
     "CameraIntrinsics",
@@ -46,14 +59,20 @@ __all__ = [
     "NormalParams",
     "PlacedObject",
     "PyBulletRobot",
+    "RobotModel",
     "SceneParams",
     "SimParams",
     "back_project",
     "build_scene",
     "default_T_tip_camera",
     "depth_to_cloud",
+    "iiwa_model",
     "iiwa_urdf_path",
     "organized_normals",
+    "panda_T_hand_camera",
+    "panda_model",
+    "panda_urdf_path",
     "pose_matrix",
     "render_depth",
+    "robot_model",
 ]

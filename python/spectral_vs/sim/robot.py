@@ -1,4 +1,7 @@
-"""The simulated KUKA LBR iiwa with a wrist depth camera, in PyBullet DIRECT mode.
+"""A simulated robot arm with a wrist depth camera above the table, in PyBullet DIRECT mode.
+
+The arm is data (:class:`spectral_vs.sim.robots.RobotModel`: the KUKA LBR iiwa by default,
+the Franka Emika Panda, or any URDF).
 
 :class:`PyBulletRobot` implements :class:`spectral_vs.robot.RobotInterface`, so a servo
 loop written for it also drives a real robot.
@@ -12,41 +15,37 @@ import os
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
 import pybullet
-import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
 from spectral_vs._core import Kinematics, PointCloud
-from spectral_vs.sim.camera import CameraParams, depth_to_cloud, render_depth
+from spectral_vs.servo import ViewCheck
+from spectral_vs.sim.camera import CameraParams, back_project, depth_to_cloud, render_depth
+from spectral_vs.sim.robots import (
+    BASE_LINK,
+    HOME_Q,
+    TIP_LINK,
+    RobotModel,
+    default_T_tip_camera,
+    iiwa_model,
+    iiwa_urdf_path,
+)
 from spectral_vs.sim.scene import PlacedObject, SceneParams, build_scene
 
-#: Links of the iiwa chain in pybullet_data's kuka_iiwa/model.urdf.
-BASE_LINK = "lbr_iiwa_link_0"
-TIP_LINK = "lbr_iiwa_link_7"
-
-#: A configuration whose camera looks straight down at the clutter from 0.55 m above the
-#: table (camera at about (0.6, 0, 0.55) m in the base frame), rad.
-HOME_Q: tuple[float, ...] = (-0.1875, 0.3408, 0.2521, -1.4288, -0.085, 1.3826, -1.5042)
-
-
-def iiwa_urdf_path() -> Path:
-    """Path of the iiwa URDF shipped with ``pybullet_data``."""
-    return Path(pybullet_data.getDataPath()) / "kuka_iiwa" / "model.urdf"
-
-
-def default_T_tip_camera() -> np.ndarray:
-    """The camera mount on ``lbr_iiwa_link_7``: axes parallel to the flange frame (optical
-    axis along the flange normal, +Z of link 7), centre 5 cm in front of the link frame
-    (the flange face is at 4.5 cm) and 7 cm off the axis along -Y, so that no part of the
-    robot is in view and joint 7 moves the camera as on a real wrist mount."""
-    T = np.eye(4)
-    T[:3, 3] = (0.0, -0.07, 0.05)
-    return T
+__all__ = [
+    "BASE_LINK",
+    "HOME_Q",
+    "TIP_LINK",
+    "PyBulletRobot",
+    "SimParams",
+    "default_T_tip_camera",
+    "iiwa_urdf_path",
+    "pose_matrix",
+]
 
 
 @dataclass
@@ -66,10 +65,14 @@ class SimParams:
         hardware does; the URDF's 10 rad/s is not a real iiwa's 1.5-2.3 rad/s).
     max_joint_torque : float
         Torque limit of every motor in dynamic mode, N m (the URDF gives 300).
-    q_start : tuple of float
-        Joint positions at construction, rad.
-    T_tip_camera : ndarray, shape (4, 4)
-        Pose of the camera frame (Z forward, X right, Y down) in ``lbr_iiwa_link_7``.
+    robot : RobotModel
+        The arm: URDF, chain, home configuration, camera mount (the iiwa by default; see
+        :func:`spectral_vs.sim.robots.robot_model`).
+    q_start : tuple of float, optional
+        Joint positions at construction, rad; ``robot.home_q`` when not given.
+    T_tip_camera : ndarray, shape (4, 4), optional
+        Pose of the camera frame (Z forward, X right, Y down) in the robot's tip link;
+        ``robot.T_tip_camera`` when not given.
     camera : CameraParams
         Intrinsics, depth noise and normal estimation.
     scene : SceneParams
@@ -80,8 +83,9 @@ class SimParams:
     time_step: float = 1.0 / 240.0
     max_joint_speed: float = 1.5
     max_joint_torque: float = 300.0
-    q_start: tuple[float, ...] = HOME_Q
-    T_tip_camera: np.ndarray = field(default_factory=default_T_tip_camera)
+    robot: RobotModel = field(default_factory=iiwa_model)
+    q_start: tuple[float, ...] | None = None
+    T_tip_camera: np.ndarray | None = None
     camera: CameraParams = field(default_factory=CameraParams)
     scene: SceneParams = field(default_factory=SceneParams)
 
@@ -94,6 +98,10 @@ class SimParams:
             or not self.max_joint_torque > 0.0
         ):
             raise ValueError("time_step, max_joint_speed and max_joint_torque must be > 0")
+        if self.q_start is None:
+            self.q_start = self.robot.home_q
+        if self.T_tip_camera is None:
+            self.T_tip_camera = np.array(self.robot.T_tip_camera)
 
 
 @contextlib.contextmanager
@@ -143,15 +151,17 @@ def pose_matrix(position, quaternion) -> np.ndarray:
 
 
 class PyBulletRobot:
-    """The iiwa on the table with its wrist camera, in its own PyBullet DIRECT client.
+    """A robot arm (``params.robot``) on the table with its wrist camera, in its own
+    PyBullet DIRECT client.
 
-    The robot base frame is the world frame. Use as a context manager, or call
+    The robot base frame is the world frame. The joints of ``robot.held_joints`` (the
+    Panda's fingers) are kept at their positions. Use as a context manager, or call
     :meth:`close`, to free the physics server.
 
     Parameters
     ----------
     params : SimParams
-        The simulation; defaults to a kinematic simulation at :data:`HOME_Q`.
+        The simulation; defaults to a kinematic simulation of the iiwa at :data:`HOME_Q`.
     """
 
     def __init__(self, params: SimParams | None = None) -> None:
@@ -161,22 +171,27 @@ class PyBulletRobot:
         self._client.setGravity(0.0, 0.0, -9.81)
         self._client.setTimeStep(self.params.time_step)
         self.objects: list[PlacedObject] = build_scene(self._client, self.params.scene)
+        model = self.params.robot
         self.robot_id = self._client.loadURDF(
-            str(iiwa_urdf_path()), basePosition=[0.0, 0.0, 0.0], useFixedBase=True
+            str(model.urdf_path), basePosition=[0.0, 0.0, 0.0], useFixedBase=True
         )
         self.kinematics = Kinematics(
-            iiwa_urdf_path(), BASE_LINK, TIP_LINK, self.params.T_tip_camera
+            model.urdf_path, model.base_link, model.tip_link, self.params.T_tip_camera
         )
+        #: Pose of the camera in the tip link, (4, 4), metres.
+        self.T_tip_camera = np.asarray(self.kinematics.T_tip_camera)
         self._joints = self._movable_joints()
-        self._tip_index = self._link_index(TIP_LINK)
+        self._held = self._held_joints()
+        self._tip_index = self._link_index(model.tip_link)
         self._rng = np.random.default_rng(self.params.camera.noise.seed)
         self._time = 0.0
-        self.reset_joint_positions(self.params.q_start)
+        q_start = self.params.q_start
+        self.reset_joint_positions(self.params.robot.home_q if q_start is None else q_start)
 
     # --- RobotInterface --------------------------------------------------------------
 
     def joint_positions(self) -> np.ndarray:
-        """Current joint positions, shape (7,), rad."""
+        """Current joint positions of the chain, shape (n,), rad."""
         states = self._client.getJointStates(self.robot_id, self._joints)
         return np.array([state[0] for state in states])
 
@@ -225,13 +240,13 @@ class PyBulletRobot:
 
         Parameters
         ----------
-        q : array_like, shape (7,)
-            Joint positions, rad.
+        q : array_like, shape (n,)
+            Joint positions of the chain, rad.
 
         Raises
         ------
         ValueError
-            If ``q`` does not hold 7 finite values.
+            If ``q`` does not hold n finite values.
         """
         q = np.asarray(q, dtype=float)
         if q.shape != (len(self._joints),) or not np.all(np.isfinite(q)):
@@ -239,6 +254,7 @@ class PyBulletRobot:
         for joint, value in zip(self._joints, q, strict=True):
             self._client.resetJointState(self.robot_id, joint, float(value), 0.0)
         self._set_motor_velocities(np.zeros(len(self._joints)))
+        self._hold_joints()
 
     def capture_depth(self) -> np.ndarray:
         """The planar depth image (H, W), metres, NaN where missing; noisy if configured."""
@@ -247,7 +263,7 @@ class PyBulletRobot:
         return noise.apply(depth, self._rng) if noise.enabled else depth
 
     def tip_pose(self) -> np.ndarray:
-        """T_world_tip of ``lbr_iiwa_link_7`` as PyBullet has it (URDF link frame)."""
+        """T_world_tip of the tip link as PyBullet has it (URDF link frame)."""
         state = self._client.getLinkState(
             self.robot_id, self._tip_index, computeForwardKinematics=True
         )
@@ -255,7 +271,7 @@ class PyBulletRobot:
 
     def camera_pose(self) -> np.ndarray:
         """T_world_camera from PyBullet's link state: the ground truth of the simulation."""
-        return self.tip_pose() @ self.params.T_tip_camera
+        return self.tip_pose() @ self.T_tip_camera
 
     def T_base_camera(self, q: np.ndarray | None = None) -> np.ndarray:
         """T_base_camera from the KDL kinematics at ``q`` (the current joints by default).
@@ -263,7 +279,7 @@ class PyBulletRobot:
 
         Parameters
         ----------
-        q : ndarray, shape (7,), optional
+        q : ndarray, shape (n,), optional
             Joint positions, rad.
 
         Returns
@@ -272,6 +288,48 @@ class PyBulletRobot:
             Pose of the camera frame in the base frame.
         """
         return self.kinematics.forward(self.joint_positions() if q is None else q)
+
+    def view_check(
+        self, min_share: float = 0.3, min_camera_height: float = 0.05, q_reference=None
+    ) -> ViewCheck:
+        """The start check of :func:`spectral_vs.servo.start_poses` for this robot and scene.
+
+        The reference points are those of a noise-free depth image rendered at
+        ``q_reference`` with this camera (the arm is moved there and back), so the check,
+        and the starts it selects, do not depend on the depth noise.
+
+        Parameters
+        ----------
+        min_share : float
+            Share of the reference's points that a start must keep in view, in (0, 1].
+        min_camera_height : float
+            Lowest accepted camera height above the table top (z = 0), m.
+        q_reference : array_like, shape (n,), optional
+            Configuration of the reference, rad; ``robot.home_q`` by default.
+
+        Returns
+        -------
+        spectral_vs.servo.ViewCheck
+            ``check(q) -> bool``.
+        """
+        q_reference = np.asarray(
+            self.params.robot.home_q if q_reference is None else q_reference, dtype=float
+        )
+        q_now = self.joint_positions()
+        self.reset_joint_positions(q_reference)
+        intrinsics = self.params.camera.intrinsics
+        depth = render_depth(self._client, self.camera_pose(), intrinsics)
+        self.reset_joint_positions(q_now)
+        return ViewCheck(
+            self.kinematics,
+            q_reference,
+            back_project(depth, intrinsics).reshape(-1, 3),
+            intrinsics.matrix(),
+            (intrinsics.width, intrinsics.height),
+            depth_range=(intrinsics.near, intrinsics.far),
+            min_share=min_share,
+            min_camera_height=min_camera_height,
+        )
 
     def close(self) -> None:
         """Disconnect the physics server (idempotent)."""
@@ -295,6 +353,33 @@ class PyBulletRobot:
             if info[2] != pybullet.JOINT_FIXED:
                 by_name[info[1].decode()] = index
         return [by_name[name] for name in names]
+
+    def _held_joints(self) -> list[tuple[int, float, float]]:
+        """(index, position, force limit) of every joint of ``robot.held_joints``."""
+        by_name = {}
+        for index in range(self._client.getNumJoints(self.robot_id)):
+            info = self._client.getJointInfo(self.robot_id, index)
+            by_name[info[1].decode()] = (index, float(info[10]))
+        held = []
+        for name, position in self.params.robot.held_joints:
+            if name not in by_name:
+                urdf = self.params.robot.urdf_path.name
+                raise ValueError(f"robot.held_joints names {name!r}, not a joint of {urdf}")
+            index, force = by_name[name]
+            held.append((index, position, force if force > 0.0 else self.params.max_joint_torque))
+        return held
+
+    def _hold_joints(self) -> None:
+        """Put the held joints at their positions; position motors keep them there."""
+        for index, position, force in self._held:
+            self._client.resetJointState(self.robot_id, index, position, 0.0)
+            self._client.setJointMotorControl2(
+                self.robot_id,
+                index,
+                pybullet.POSITION_CONTROL,
+                targetPosition=position,
+                force=force,
+            )
 
     def _link_index(self, link_name: str) -> int:
         for index in range(self._client.getNumJoints(self.robot_id)):
