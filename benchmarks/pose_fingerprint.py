@@ -25,7 +25,7 @@ import spectral_vs as svs
 from spectral_vs._core import ModelAligner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import cases as case_lib  # noqa: E402
+import cases as case_lib
 
 ANGLES = (30.0, 120.0)
 

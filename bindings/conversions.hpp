@@ -113,6 +113,7 @@ void define_translation(py::module_& m);
 void define_rotation(py::module_& m);
 void define_alignment(py::module_& m);
 void define_model_aligner(py::module_& m);
+void define_view_aligner(py::module_& m);
 void define_kinematics(py::module_& m);
 
 }  // namespace spectral_vs::python

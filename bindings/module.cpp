@@ -9,5 +9,6 @@ PYBIND11_MODULE(_core, m) {
   spectral_vs::python::define_rotation(m);
   spectral_vs::python::define_alignment(m);
   spectral_vs::python::define_model_aligner(m);
+  spectral_vs::python::define_view_aligner(m);
   spectral_vs::python::define_kinematics(m);
 }

@@ -144,7 +144,8 @@ drop_non_finite : bool
           py::gil_scoped_release release;
           points = load_points(path.string(), &info);
         }
-        py::array_t<double> out({py::ssize_t(info.height), py::ssize_t(info.width), py::ssize_t(3)});
+        py::array_t<double> out(
+            {py::ssize_t(info.height), py::ssize_t(info.width), py::ssize_t(3)});
         std::copy(points.data(), points.data() + points.size(), out.mutable_data());
         return out;
       },

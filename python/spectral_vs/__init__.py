@@ -28,6 +28,10 @@ from spectral_vs._core import (
     TranslationEstimate,
     VelocityCommand,
     VelocityCommandParams,
+    ViewAlignParams,
+    ViewAlignResult,
+    ViewScale,
+    ViewSupport,
     VoxelGrid,
     damped_least_squares,
     egi,
@@ -51,6 +55,8 @@ from spectral_vs._core import (
     so3_search,
     sphere_grid,
     translation_cost,
+    view_scale,
+    view_support,
     voxel_downsample,
     voxelize,
     wigner_generators,
@@ -66,6 +72,7 @@ from spectral_vs.servo import (
     SpectralServo,
     run_servo,
 )
+from spectral_vs.views import align_views
 
 __version__ = "0.1.0"
 
@@ -120,8 +127,13 @@ __all__ = [
     "TranslationEstimate",
     "VelocityCommand",
     "VelocityCommandParams",
+    "ViewAlignParams",
+    "ViewAlignResult",
+    "ViewScale",
+    "ViewSupport",
     "VoxelGrid",
     "align",
+    "align_views",
     "damped_least_squares",
     "egi",
     "egi_cell",
@@ -146,6 +158,8 @@ __all__ = [
     "so3_search",
     "sphere_grid",
     "translation_cost",
+    "view_scale",
+    "view_support",
     "voxel_downsample",
     "voxelize",
     "wigner_generators",

@@ -419,6 +419,94 @@ class ModelAligner:
     @property
     def last_timings(self) -> ModelAlignerTimings: ...
 
+# --- Two views of one scene (bindings/view_aligner.cpp) ---------------------
+
+class ViewScale:
+    """The lengths a registration works at, metres."""
+
+    @property
+    def voxel_size(self) -> float: ...
+    @property
+    def search_voxel_size(self) -> float: ...
+    @property
+    def extent(self) -> float: ...
+
+def view_scale(
+    reference: PointCloud, current: PointCloud, voxels_across: float = 24.0
+) -> ViewScale: ...
+
+class ViewAlignParams:
+    """Settings of align_views; every length 0 by default: derived from the views."""
+
+    def __init__(self, **kwargs: Any) -> None: ...
+    def __copy__(self) -> ViewAlignParams: ...
+    voxel_size: float  # metres; 0: derived
+    search_voxel_size: float  # metres; 0: twice the voxel
+    voxels_across: float
+    downsample: bool
+    bandwidth: int
+    hypotheses: int
+    refinements: int
+    refinement_iterations: int
+    icp_refinement: bool
+    @property
+    def current_viewpoint(self) -> _Array: ...  # (3,) metres
+    @current_viewpoint.setter
+    def current_viewpoint(self, value: npt.ArrayLike) -> None: ...
+    max_seconds: float
+    threads: int
+    occupancy: str  # "trilinear", "binary" or "count"
+    egi_method: str  # "projection" or "histogram"
+    max_voxels: int
+
+class ViewSupport:
+    """How well the current view supports a pose of the reference."""
+
+    @property
+    def confirmed(self) -> int: ...
+    @property
+    def contradicted(self) -> int: ...
+    @property
+    def hidden(self) -> int: ...
+    @property
+    def reference_pixels(self) -> int: ...
+    @property
+    def fitness(self) -> float: ...
+    @property
+    def overlap(self) -> float: ...
+    @property
+    def score(self) -> float: ...
+
+class ViewAlignResult:
+    """Outcome of align_views."""
+
+    @property
+    def T_current_reference(self) -> _Array: ...  # (4, 4)
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def support(self) -> ViewSupport: ...
+    @property
+    def correlation(self) -> float: ...
+    @property
+    def scale(self) -> ViewScale: ...
+    @property
+    def hypothesis(self) -> int: ...
+    @property
+    def icp_iterations(self) -> int: ...
+    @property
+    def hypotheses(self) -> list[tuple[_Array, ViewSupport]]: ...
+
+def view_support(
+    reference: PointCloud,
+    current: PointCloud,
+    T_current_reference: npt.ArrayLike,
+    params: ViewAlignParams = ...,
+) -> ViewSupport: ...
+def align_views(
+    reference: PointCloud, current: PointCloud, params: ViewAlignParams = ...
+) -> ViewAlignResult: ...
+
 # --- Kinematics (bindings/kinematics.cpp) ------------------------------------
 
 class DampingParams:

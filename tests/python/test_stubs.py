@@ -194,6 +194,8 @@ def stub_signature(node: ast.FunctionDef) -> list[Parameter]:
         parameters.append((arg.arg, "positional", stub_default(default)))
     for arg, default in zip(args.kwonlyargs, args.kw_defaults, strict=True):
         parameters.append((arg.arg, "keyword", stub_default(default)))
+    if args.kwarg is not None:  # pybind11 writes **kwargs where the positional ones go
+        parameters.append((f"**{args.kwarg.arg}", "positional", NO_DEFAULT))
     return parameters
 
 

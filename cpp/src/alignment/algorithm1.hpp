@@ -57,8 +57,8 @@ struct Algorithm1Problem {
 Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params);
 
 /// Algorithm 1 from `pose` until the stop rule of eq. (17), `max_iterations` or the
-/// deadline; `pose` is left where it ended. Returns that pose, the history, converged, stop_reason, the final
-/// correlation and translation peak, and the window's dims when it ended on one; the
+/// deadline; `pose` is left where it ended. Returns that pose, the history, converged, stop_reason,
+/// the final correlation and translation peak, and the window's dims when it ended on one; the
 /// fitness is the caller's to score.
 AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
                            int max_iterations, Algorithm1Timings* timings = nullptr);

@@ -192,9 +192,9 @@ class SceneThenWindow : public detail::TranslationSource {
 AlignResult run_algorithm1(const Problem& problem, So3Correlation& correlation,
                            const ShCoefficients& scene_coefficients, Pose pose,
                            detail::TranslationSource& source, int max_iterations) {
-  const detail::Algorithm1Problem loop{correlation, scene_coefficients,
-                                       problem.model_coefficients, problem.model, problem.params,
-                                       problem.deadline};
+  const detail::Algorithm1Problem loop{
+      correlation,   scene_coefficients, problem.model_coefficients,
+      problem.model, problem.params,     problem.deadline};
   AlignResult result = detail::run_algorithm1(loop, pose, source, max_iterations);
   result.fitness =
       problem.model.fitness(problem.scene, problem.view, pose, problem.params.voxel_size);

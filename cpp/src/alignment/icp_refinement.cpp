@@ -10,96 +10,85 @@
 
 namespace spectral_vs::detail {
 
-namespace {
-
-// The scene points near the model, sorted into a dense grid of cells at least
-// max_distance wide (compressed rows: per cell, a range of point indices): a point's
-// nearest neighbour within that distance is in its own cell or one of the 26 around it.
-class NeighbourGrid {
- public:
-  NeighbourGrid(const PointCloud& scene, const Eigen::AlignedBox3d& around, double max_distance)
-      : scene_(scene) {
-    constexpr double kMaxCells = 4194304.0;  // 2^22: 32 MB of offsets at most
-    const Eigen::Array3d extent = around.sizes().array();
-    cell_ = max_distance;
-    origin_ = around.min();
-    // Coarser cells for a large model (a flat one too): still at least max_distance wide.
-    // Counted in double, so that no count overflows an int before it is checked.
-    while (((extent / cell_).floor() + 1.0).prod() > kMaxCells) cell_ *= 1.25;
-    dims_ = ((extent / cell_).floor() + 1.0).cast<int>();
-    std::vector<std::pair<std::int64_t, Eigen::Index>> keyed;
-    for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
-      const Eigen::Vector3d p = scene.points().row(i).transpose();
-      if (around.contains(p)) keyed.emplace_back(linear(cell_of(p)), i);
-    }
-    std::sort(keyed.begin(), keyed.end());
-    start_.assign(std::size_t(dims_.prod()) + 1, 0);
-    rows_.reserve(keyed.size());
-    for (const auto& [cell, row] : keyed) {
-      ++start_[std::size_t(cell) + 1];
-      rows_.push_back(row);
-    }
-    for (std::size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
+IcpScene::IcpScene(const PointCloud& scene, const Eigen::AlignedBox3d& around, double max_distance)
+    : scene_(scene) {
+  constexpr double kMaxCells = 4194304.0;  // 2^22: 32 MB of offsets at most
+  const Eigen::Array3d extent = around.sizes().array();
+  cell_ = max_distance;
+  origin_ = around.min();
+  // Coarser cells for a large model (a flat one too): still at least max_distance wide.
+  // Counted in double, so that no count overflows an int before it is checked.
+  while (((extent / cell_).floor() + 1.0).prod() > kMaxCells) cell_ *= 1.25;
+  dims_ = ((extent / cell_).floor() + 1.0).cast<int>();
+  std::vector<std::pair<std::int64_t, Eigen::Index>> keyed;
+  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
+    const Eigen::Vector3d p = scene.points().row(i).transpose();
+    if (around.contains(p)) keyed.emplace_back(linear(cell_of(p)), i);
   }
+  std::sort(keyed.begin(), keyed.end());
+  start_.assign(std::size_t(dims_.prod()) + 1, 0);
+  rows_.reserve(keyed.size());
+  for (const auto& [cell, row] : keyed) {
+    ++start_[std::size_t(cell) + 1];
+    rows_.push_back(row);
+  }
+  for (std::size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
+}
 
-  // The nearest scene point within `max_distance` of p whose normal has a cosine of at
-  // least `min_cosine` with n; -1 if none.
-  Eigen::Index nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& n, double max_distance,
-                       double min_cosine) const {
-    Eigen::Index best = -1;
-    double best_squared = max_distance * max_distance;
-    const Eigen::Array3i c = cell_of(p);
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          const Eigen::Array3i neighbour = c + Eigen::Array3i(dx, dy, dz);
-          if ((neighbour < 0).any() || (neighbour >= dims_).any()) continue;
-          const std::int64_t cell = linear(neighbour);
-          for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
-            const Eigen::Index i = rows_[k];
-            const double squared = (scene_.points().row(i).transpose() - p).squaredNorm();
-            if (squared < best_squared && scene_.normals().row(i).dot(n) >= min_cosine) {
-              best_squared = squared;
-              best = i;
-            }
+Eigen::Index IcpScene::nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& n,
+                               double max_distance, double min_cosine) const {
+  Eigen::Index best = -1;
+  double best_squared = max_distance * max_distance;
+  const Eigen::Array3i c = cell_of(p);
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        const Eigen::Array3i neighbour = c + Eigen::Array3i(dx, dy, dz);
+        if ((neighbour < 0).any() || (neighbour >= dims_).any()) continue;
+        const std::int64_t cell = linear(neighbour);
+        for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
+          const Eigen::Index i = rows_[k];
+          const double squared = (scene_.points().row(i).transpose() - p).squaredNorm();
+          if (squared < best_squared && scene_.normals().row(i).dot(n) >= min_cosine) {
+            best_squared = squared;
+            best = i;
           }
         }
-    return best;
-  }
+      }
+  return best;
+}
 
- private:
-  Eigen::Array3i cell_of(const Eigen::Vector3d& p) const {
-    // Clamped into [-1, dims]: a point outside the box has no neighbours in it beyond.
-    const Eigen::Array3d v = ((p - origin_) / cell_).array().floor();
-    return v.max(-1.0).min(dims_.cast<double>()).cast<int>();
-  }
-  std::int64_t linear(const Eigen::Array3i& c) const {
-    return (std::int64_t(c.x()) * dims_.y() + c.y()) * dims_.z() + c.z();
-  }
+Eigen::Array3i IcpScene::cell_of(const Eigen::Vector3d& p) const {
+  // Clamped into [-1, dims]: a point outside the box has no neighbours in it beyond.
+  const Eigen::Array3d v = ((p - origin_) / cell_).array().floor();
+  return v.max(-1.0).min(dims_.cast<double>()).cast<int>();
+}
 
-  const PointCloud& scene_;
-  double cell_ = 0.0;
-  Eigen::Vector3d origin_;
-  Eigen::Array3i dims_;
-  std::vector<std::size_t> start_;  // per cell, where its rows begin in rows_
-  std::vector<Eigen::Index> rows_;
-};
-
-}  // namespace
+std::int64_t IcpScene::linear(const Eigen::Array3i& c) const {
+  return (std::int64_t(c.x()) * dims_.y() + c.y()) * dims_.z() + c.z();
+}
 
 IcpOutcome refine_point_to_plane(const PointCloud& model, const PointCloud& scene,
                                  const Transform& T_scene_model, const IcpSettings& settings) {
-  IcpOutcome outcome;
-  outcome.T_scene_model = T_scene_model;
-  Eigen::Matrix3d R = T_scene_model.topLeftCorner<3, 3>();
-  Eigen::Vector3d t = T_scene_model.topRightCorner<3, 1>();
+  const Eigen::Matrix3d R = T_scene_model.topLeftCorner<3, 3>();
+  const Eigen::Vector3d t = T_scene_model.topRightCorner<3, 1>();
   const Points moved_at_start = (model.points() * R.transpose()).rowwise() + t.transpose();
   Eigen::AlignedBox3d around(moved_at_start.colwise().minCoeff().transpose(),
                              moved_at_start.colwise().maxCoeff().transpose());
   // Room for the motion of the steps: a few max_distances.
   around.min().array() -= 4.0 * settings.max_distance;
   around.max().array() += 4.0 * settings.max_distance;
-  const NeighbourGrid grid(scene, around, settings.max_distance);
+  return refine_point_to_plane(model, IcpScene(scene, around, settings.max_distance), T_scene_model,
+                               settings);
+}
+
+IcpOutcome refine_point_to_plane(const PointCloud& model, const IcpScene& grid,
+                                 const Transform& T_scene_model, const IcpSettings& settings) {
+  const PointCloud& scene = grid.cloud();
+  IcpOutcome outcome;
+  outcome.T_scene_model = T_scene_model;
+  Eigen::Matrix3d R = T_scene_model.topLeftCorner<3, 3>();
+  Eigen::Vector3d t = T_scene_model.topRightCorner<3, 1>();
   // About one model point in `share`: a couple of thousand pairs pin six degrees of
   // freedom. Chosen by a multiplicative hash of the index, not every k-th point, which
   // would alias with a cloud stored in a regular order (alternating parts, scan rows).

@@ -5,7 +5,9 @@
 #include <spectral_vs/representation/point_cloud.hpp>
 
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <optional>
+#include <vector>
 
 namespace spectral_vs::detail {
 
@@ -26,6 +28,36 @@ struct IcpOutcome {
   int iterations = 0;  ///< Gauss-Newton steps taken.
   int pairs = 0;       ///< Matched pairs at the last step.
 };
+
+/// The scene points inside a box, sorted into a dense grid of cells at least
+/// `max_distance` wide (compressed rows: per cell, a range of point indices): a point's
+/// nearest neighbour within that distance is in its own cell or one of the 26 around it.
+/// Made once, it serves every ICP run on that scene with pairs within `max_distance`.
+class IcpScene {
+ public:
+  IcpScene(const PointCloud& scene, const Eigen::AlignedBox3d& around, double max_distance);
+  /// The nearest scene point within `max_distance` (at most the grid's) of p whose
+  /// normal has a cosine of at least `min_cosine` with n; -1 if none.
+  Eigen::Index nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& n, double max_distance,
+                       double min_cosine) const;
+  const PointCloud& cloud() const { return scene_; }
+
+ private:
+  Eigen::Array3i cell_of(const Eigen::Vector3d& p) const;
+  std::int64_t linear(const Eigen::Array3i& c) const;
+
+  const PointCloud& scene_;
+  double cell_ = 0.0;
+  Eigen::Vector3d origin_;
+  Eigen::Array3i dims_;
+  std::vector<std::size_t> start_;  // per cell, where its rows begin in rows_
+  std::vector<Eigen::Index> rows_;
+};
+
+/// `refine_point_to_plane` on a scene prepared as an IcpScene (settings.max_distance at
+/// most the distance it was made for).
+IcpOutcome refine_point_to_plane(const PointCloud& model, const IcpScene& scene,
+                                 const Transform& T_scene_model, const IcpSettings& settings);
 
 /// Point-to-plane ICP from `T_scene_model`: each step pairs every model point with its
 /// nearest scene point within settings.max_distance whose normal agrees, and takes the

@@ -120,12 +120,15 @@ struct ModelAligner::Impl {
     BoundedGrid grid(*this, place_grid(scene, pose));
     timings.translation_grid = seconds_since(t);
 
-    const detail::Algorithm1Problem loop{correlation,     scene_coefficients,
-                                         model_coefficients, *moving_model,
-                                         params,          detail::deadline_of(params, started)};
+    const detail::Algorithm1Problem loop{correlation,
+                                         scene_coefficients,
+                                         model_coefficients,
+                                         *moving_model,
+                                         params,
+                                         detail::deadline_of(params, started)};
     detail::Algorithm1Timings loop_timings;
-    AlignResult result = detail::run_algorithm1(loop, pose, grid, params.max_iterations,
-                                                &loop_timings);
+    AlignResult result =
+        detail::run_algorithm1(loop, pose, grid, params.max_iterations, &loop_timings);
     timings.rotation = loop_timings.rotation;
     timings.translation = loop_timings.translation;
     timings.records = loop_timings.records;

@@ -13,6 +13,10 @@ namespace {
 constexpr double kMaxPixels = 4194304.0;  // 2^22: a 2048 x 2048 image at most
 constexpr double kMaxSlope = 3.0;         // rays up to about 72 degrees off the axis
 constexpr float kNothing = std::numeric_limits<float>::infinity();
+// With Distance::along_normal, the largest depth difference of a point on the surface, in
+// tolerances: a surface at 75 degrees to the ray changes its depth by about 4 tolerances
+// across a pixel of 2 (the support check's half-voxel pixels at a quarter-voxel tolerance).
+constexpr double kSlantDepth = 4.0;
 
 // The camera's rows: x and y of the image, then the viewing axis toward `target`.
 Eigen::Matrix3d look_at(const Eigen::Vector3d& viewpoint, const Eigen::Vector3d& target) {
@@ -93,8 +97,11 @@ RangeImage::RangeImage(const PointCloud& cloud, const Eigen::Vector3d& viewpoint
     }
   }
   normal_.assign(depth_.size(), Eigen::Vector3f::Zero());
+  point_.assign(depth_.size(), Eigen::Vector3f::Zero());
   for (std::size_t k = 0; k < depth_.size(); ++k) {
-    if (filled[k] >= 0) normal_[k] = cloud.normals().row(filled[k]).transpose().cast<float>();
+    if (filled[k] < 0) continue;
+    normal_[k] = cloud.normals().row(filled[k]).transpose().cast<float>();
+    point_[k] = scene.row(filled[k]).transpose().cast<float>();
   }
 }
 
@@ -107,7 +114,8 @@ bool RangeImage::project(const Eigen::Vector3d& p, Pixel& pixel) const {
   return true;
 }
 
-ViewCheck RangeImage::check(const Points& points, const Points& normals, double tolerance) const {
+ViewCheck RangeImage::check(const Points& points, const Points& normals, double tolerance,
+                            Distance distance) const {
   model_.clear();
   Pixel pixel;
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
@@ -124,12 +132,19 @@ ViewCheck RangeImage::check(const Points& points, const Points& normals, double 
   const float turned = float(std::cos(45.0 * M_PI / 180.0));
   ViewCheck result;
   for (std::size_t i = 0; i < model_.size(); ++i) {
-    if (i > 0 && model_[i].u == model_[i - 1].u && model_[i].v == model_[i - 1].v) continue;
     const std::size_t k = index(model_[i].u, model_[i].v);
     const double scanned = depth_[k], depth = model_[i].depth;
-    if (std::abs(scanned - depth) <= tolerance) {
-      const bool same_way =
-          normal_[k].dot(normals.row(model_[i].row).transpose().cast<float>()) > turned;
+    const bool on_surface =
+        distance == Distance::depth
+            ? std::abs(scanned - depth) <= tolerance
+            : std::abs(scanned - depth) <= kSlantDepth * tolerance &&
+                  std::abs(normal_[k].dot(points.row(model_[i].row).transpose().cast<float>() -
+                                          point_[k])) <= tolerance;
+    const bool same_way =
+        on_surface && normal_[k].dot(normals.row(model_[i].row).transpose().cast<float>()) > turned;
+    if (same_way) ++result.supported_points;
+    if (i > 0 && model_[i].u == model_[i - 1].u && model_[i].v == model_[i - 1].v) continue;
+    if (on_surface) {
       ++(same_way ? result.confirmed : result.contradicted);
     } else if (scanned > depth) {
       ++result.contradicted;

@@ -18,6 +18,9 @@ struct ViewCheck {
   int confirmed = 0;
   int contradicted = 0;
   int hidden = 0;
+  /// Model points, each (not only the nearest of its pixel), within the tolerance of the
+  /// scan's depth at their pixel and turned its way within 45 degrees.
+  int supported_points = 0;
 
   /// confirmed / (confirmed + contradicted + hidden / 2), in [0, 1]: a hidden pixel
   /// neither confirms nor refutes a pose, but a pose tucked behind other surfaces should
@@ -35,9 +38,18 @@ class RangeImage {
   /// @throws std::invalid_argument if no scene point is in front of `viewpoint`.
   RangeImage(const PointCloud& scene, const Eigen::Vector3d& viewpoint, double pixel_size);
 
+  /// How `check` decides that a model point is on the scanned surface of its pixel.
+  enum class Distance {
+    depth,         ///< Its depth is within the tolerance of the pixel's.
+    along_normal,  ///< Its distance to the plane of the pixel's scan point and normal is:
+                   ///< on a surface seen at a slant the depth changes by more than the
+                   ///< tolerance across one pixel.
+  };
+
   /// The check of model points with their normals, in scene coordinates; `tolerance`:
-  /// depth difference, metres, within which a model point is on the scanned surface.
-  ViewCheck check(const Points& points, const Points& normals, double tolerance) const;
+  /// distance, metres, within which a model point is on the scanned surface.
+  ViewCheck check(const Points& points, const Points& normals, double tolerance,
+                  Distance distance = Distance::depth) const;
 
  private:
   struct Pixel {
@@ -56,6 +68,7 @@ class RangeImage {
   int u0_ = 0, v0_ = 0, width_ = 0, height_ = 0;
   std::vector<float> depth_;             // +inf where the scan saw nothing
   std::vector<Eigen::Vector3f> normal_;  // of the nearest scan point
+  std::vector<Eigen::Vector3f> point_;   // the nearest scan point
   mutable std::vector<Pixel> model_;     // scratch of check()
 };
 

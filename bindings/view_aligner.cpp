@@ -1,0 +1,252 @@
+// Bindings of align_views: two views of one scene registered globally.
+#include "conversions.hpp"
+
+#include <spectral_vs/alignment/view_aligner.hpp>
+
+#include <pybind11/stl.h>
+
+#include <sstream>
+
+namespace spectral_vs::python {
+
+namespace {
+
+const char* kViewAlignParamsDoc = R"doc(
+Settings of ``align_views``; every length 0 by default: derived from the views.
+
+Takes its fields as keyword arguments: ``ViewAlignParams(hypotheses=24, threads=2)``.
+
+Attributes
+----------
+voxel_size : float
+    Voxel of Algorithm 1's grid and of the support check, m; 0: ``view_scale``'s
+    ``max(extent / voxels_across, 3 extent / sqrt(N))``.
+search_voxel_size : float
+    Voxel of the hypotheses' placement grid, m; 0: twice the voxel.
+voxels_across : float
+    With voxel_size 0: voxels across the larger view's typical size (twice the median
+    distance of its points from their median), >= 4 (default 24).
+downsample : bool
+    Downsample both views to half a voxel first (default True).
+bandwidth : int
+    B of the EGIs and of the SO(3) search, in [2, 64] (default 16).
+hypotheses : int
+    Rotations of the SO(3) search placed and checked, >= 1 (default 16).
+refinements : int
+    Best-checked hypotheses refined by Algorithm 1 and the ICP, in [1, hypotheses].
+refinement_iterations : int
+    Iterations of Algorithm 1 per refinement, >= 1.
+icp_refinement : bool
+    Point-to-plane ICP after Algorithm 1, kept where it does not lower the score.
+current_viewpoint : ndarray (3,)
+    The current view's sensor origin in its coordinates, m (the origin for a depth
+    camera's cloud in its own frame).
+max_seconds : float
+    Time budget, s (0: none).
+threads : int
+    Threads for FFTW and the SO(3) search, in [1, 256].
+occupancy : str
+    'binary', 'count' or 'trilinear' voxels (default 'trilinear').
+egi_method : str
+    'projection' or 'histogram' EGI coefficients.
+max_voxels : int
+    Largest grid allowed, voxels.
+)doc";
+
+std::string repr(const ViewAlignParams& p) {
+  std::ostringstream out;
+  out << "ViewAlignParams(voxel_size=" << p.voxel_size
+      << ", search_voxel_size=" << p.search_voxel_size << ", voxels_across=" << p.voxels_across
+      << ", downsample=" << (p.downsample ? "True" : "False") << ", bandwidth=" << p.bandwidth
+      << ", hypotheses=" << p.hypotheses << ", refinements=" << p.refinements
+      << ", refinement_iterations=" << p.refinement_iterations
+      << ", icp_refinement=" << (p.icp_refinement ? "True" : "False") << ", current_viewpoint=["
+      << p.current_viewpoint.x() << ", " << p.current_viewpoint.y() << ", "
+      << p.current_viewpoint.z() << "], max_seconds=" << p.max_seconds << ", threads=" << p.threads
+      << ", occupancy='" << choice_name(p.occupancy, kOccupancies) << "', egi_method='"
+      << choice_name(p.egi_method, kEgiMethods) << "', max_voxels=" << p.limits.max_voxels << ")";
+  return out.str();
+}
+
+std::string repr(const ViewSupport& s) {
+  std::ostringstream out;
+  out << "ViewSupport(score=" << s.score << ", fitness=" << s.fitness << ", overlap=" << s.overlap
+      << ", confirmed=" << s.confirmed << ", contradicted=" << s.contradicted
+      << ", hidden=" << s.hidden << ")";
+  return out.str();
+}
+
+}  // namespace
+
+void define_view_aligner(py::module_& m) {
+  py::class_<ViewScale>(m, "ViewScale", "The lengths a registration works at, metres.")
+      .def_readonly("voxel_size", &ViewScale::voxel_size, "Voxel of Algorithm 1 and the check, m.")
+      .def_readonly("search_voxel_size", &ViewScale::search_voxel_size,
+                    "Voxel of the hypotheses' placement, m.")
+      .def_readonly("extent", &ViewScale::extent,
+                    "The larger view's typical size: twice the median distance of its points from "
+                    "their median, m.")
+      .def("__repr__", [](const ViewScale& s) {
+        std::ostringstream out;
+        out << "ViewScale(voxel_size=" << s.voxel_size
+            << ", search_voxel_size=" << s.search_voxel_size << ", extent=" << s.extent << ")";
+        return out.str();
+      });
+
+  m.def(
+      "view_scale",
+      [](const PointCloud& reference, const PointCloud& current, double voxels_across) {
+        return view_scale(reference, current, voxels_across);
+      },
+      py::arg("reference"), py::arg("current"), py::arg("voxels_across") = 24.0,
+      "The scale align_views derives from two views: voxel max(extent / voxels_across, "
+      "3 extent / sqrt(N)) with extent twice the median distance of the larger view's points "
+      "from their median, search voxel twice that.");
+
+  py::class_<ViewAlignParams> params(m, "ViewAlignParams", kViewAlignParamsDoc);
+  params
+      .def(py::init([](const py::kwargs& fields) {
+        ViewAlignParams p;
+        py::object self = py::cast(&p, py::return_value_policy::reference);
+        for (const auto& [name, value] : fields) {
+          const std::string key = py::str(name);
+          if (!py::hasattr(self, key.c_str()) || key.rfind('_', 0) == 0)
+            throw py::type_error("ViewAlignParams has no setting '" + key + "'");
+          py::setattr(self, key.c_str(), value);
+        }
+        return p;
+      }))
+      .def_readwrite("voxel_size", &ViewAlignParams::voxel_size)
+      .def_readwrite("search_voxel_size", &ViewAlignParams::search_voxel_size)
+      .def_readwrite("voxels_across", &ViewAlignParams::voxels_across)
+      .def_readwrite("downsample", &ViewAlignParams::downsample)
+      .def_readwrite("bandwidth", &ViewAlignParams::bandwidth)
+      .def_readwrite("hypotheses", &ViewAlignParams::hypotheses)
+      .def_readwrite("refinements", &ViewAlignParams::refinements)
+      .def_readwrite("refinement_iterations", &ViewAlignParams::refinement_iterations)
+      .def_readwrite("icp_refinement", &ViewAlignParams::icp_refinement)
+      .def_property(
+          "current_viewpoint",
+          [](const ViewAlignParams& p) { return Eigen::Vector3d(p.current_viewpoint); },
+          [](ViewAlignParams& p, const py::handle& value) {
+            const auto array = py::array_t<double, py::array::forcecast>::ensure(value);
+            if (!array || array.size() != 3)
+              throw py::value_error("current_viewpoint must be 3 numbers (metres)");
+            p.current_viewpoint = Eigen::Vector3d(array.at(0), array.at(1), array.at(2));
+          })
+      .def_readwrite("max_seconds", &ViewAlignParams::max_seconds)
+      .def_readwrite("threads", &ViewAlignParams::threads)
+      .def_property(
+          "occupancy",
+          [](const ViewAlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
+          [](ViewAlignParams& p, const std::string& s) {
+            p.occupancy = parse_choice(s, kOccupancies, "occupancy");
+          })
+      .def_property(
+          "egi_method",
+          [](const ViewAlignParams& p) { return choice_name(p.egi_method, kEgiMethods); },
+          [](ViewAlignParams& p, const std::string& s) {
+            p.egi_method = parse_choice(s, kEgiMethods, "egi_method");
+          })
+      .def_property(
+          "max_voxels", [](const ViewAlignParams& p) { return p.limits.max_voxels; },
+          [](ViewAlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
+      .def("__copy__", [](const ViewAlignParams& p) { return ViewAlignParams(p); })
+      .def("__repr__", [](const ViewAlignParams& p) { return repr(p); });
+
+  py::class_<ViewSupport>(m, "ViewSupport", R"doc(
+How well the current view supports a pose of the reference: the reference, moved by the
+pose, rendered from the current view's sensor in pixels of half a voxel, each pixel
+compared with the current view's depth there.
+
+Attributes
+----------
+confirmed, contradicted, hidden : int
+    Pixels where the current view has the surface (within a voxel, normals within 45
+    degrees); saw through it or a surface turned another way; saw something nearer.
+reference_pixels : int
+    confirmed + contradicted + hidden: the reference's pixels inside the current's field.
+fitness : float
+    confirmed / (confirmed + contradicted + hidden / 2), in [0, 1].
+overlap : float
+    Share of the reference's points (a selection of at most 4000) that lie on a surface
+    of the current view turned their way, in [0, 1]: about the views' overlap when the
+    pose is right.
+score : float
+    fitness * overlap, in [0, 1]: what ranks the hypotheses.
+)doc")
+      .def_readonly("confirmed", &ViewSupport::confirmed)
+      .def_readonly("contradicted", &ViewSupport::contradicted)
+      .def_readonly("hidden", &ViewSupport::hidden)
+      .def_readonly("reference_pixels", &ViewSupport::reference_pixels)
+      .def_readonly("fitness", &ViewSupport::fitness)
+      .def_readonly("overlap", &ViewSupport::overlap)
+      .def_readonly("score", &ViewSupport::score)
+      .def("__repr__", [](const ViewSupport& s) { return repr(s); });
+
+  py::class_<ViewAlignResult>(m, "ViewAlignResult", R"doc(
+Outcome of ``align_views``.
+
+Attributes
+----------
+T_current_reference : ndarray (4, 4)
+    Maps reference points into the current view's coordinates.
+converged : bool
+    The search ran to its end within max_seconds; whether the pose is right is what
+    ``support.score`` says.
+support : ViewSupport
+    Of the returned pose.
+correlation : float
+    Normalised EGI correlation at the returned rotation.
+scale : ViewScale
+    The voxel sizes it worked at.
+hypothesis : int
+    Index of the kept hypothesis (best correlated first).
+icp_iterations : int
+    ICP steps of the kept pose (0 without, or when the ICP was not kept).
+hypotheses : list of (ndarray (4, 4), ViewSupport)
+    Every checked hypothesis, best score first.
+)doc")
+      .def_property_readonly(
+          "T_current_reference",
+          [](const ViewAlignResult& r) { return Transform(r.T_current_reference); })
+      .def_readonly("converged", &ViewAlignResult::converged)
+      .def_readonly("support", &ViewAlignResult::support)
+      .def_readonly("correlation", &ViewAlignResult::correlation)
+      .def_readonly("scale", &ViewAlignResult::scale)
+      .def_readonly("hypothesis", &ViewAlignResult::hypothesis)
+      .def_readonly("icp_iterations", &ViewAlignResult::icp_iterations)
+      .def_readonly("hypotheses", &ViewAlignResult::hypotheses)
+      .def("__repr__", [](const ViewAlignResult& r) {
+        std::ostringstream out;
+        out << "ViewAlignResult(converged=" << (r.converged ? "True" : "False")
+            << ", score=" << r.support.score << ", voxel_size=" << r.scale.voxel_size << ")";
+        return out.str();
+      });
+
+  m.def(
+      "view_support",
+      [](const PointCloud& reference, const PointCloud& current, const py::handle& T,
+         const ViewAlignParams& p) {
+        const Transform pose = to_transform(T, "T_current_reference");
+        py::gil_scoped_release release;
+        return view_support(reference, current, pose, p);
+      },
+      py::arg("reference"), py::arg("current"), py::arg("T_current_reference"),
+      py::arg("params") = ViewAlignParams(),
+      "The support of a pose of the reference in the current view, as align_views scores "
+      "its refined poses (a ViewSupport).");
+
+  m.def(
+      "align_views",
+      [](const PointCloud& reference, const PointCloud& current, const ViewAlignParams& p) {
+        py::gil_scoped_release release;
+        return align_views(reference, current, p);
+      },
+      py::arg("reference"), py::arg("current"), py::arg("params") = ViewAlignParams(),
+      "Registers the reference view onto the current view (both with normals toward their "
+      "sensors): a ViewAlignResult whose T_current_reference maps reference points into the "
+      "current view.");
+}
+
+}  // namespace spectral_vs::python

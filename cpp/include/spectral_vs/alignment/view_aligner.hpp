@@ -1,0 +1,117 @@
+#pragma once
+/// @file view_aligner.hpp
+/// Scene-to-scene registration: two views of one scene (a reference view and the current
+/// view of a moving depth camera), registered globally over SO(3) and R^3. This is what
+/// direct visual servoing needs (the reference view registered onto every new view) and
+/// what a relocalization after a large motion runs. Beyond the paper, whose Algorithm 1
+/// is local: the same EGI correlation and phase correlation, searched globally.
+
+#include <spectral_vs/alignment/aligner.hpp>
+
+#include <optional>
+#include <vector>
+
+namespace spectral_vs {
+
+/// The scale of a registration: every length that the voxel grids, the search and the
+/// checks work at, metres.
+struct ViewScale {
+  double voxel_size = 0.0;         ///< Voxel of Algorithm 1's grid and of the support check.
+  double search_voxel_size = 0.0;  ///< Voxel of the hypotheses' placement grid and ICP.
+  double extent = 0.0;  ///< The larger view's typical size: twice the median distance of its
+                        ///< points from their per-axis median.
+};
+
+/// The scale of two views: `voxel_size = max(extent / voxels_across, 3 extent / sqrt(N))`
+/// where `extent` is the larger view's typical size (twice the median distance of its
+/// points from their median: where most of a depth camera's points are, not the box of
+/// its few far returns) and N the smaller view's points (a surface of N points spans
+/// about extent / sqrt(N) between neighbours: a sparse view gets voxels that hold
+/// several points). The search voxel is twice the voxel. Measured in docs/alignment.md:
+/// 24 voxels across registered the tuning pairs as well as 40 at a fifth of the time.
+/// @throws std::invalid_argument for an empty view, views of one point, or
+///         voxels_across < 4.
+ViewScale view_scale(const PointCloud& reference, const PointCloud& current,
+                     double voxels_across = 24.0);
+
+/// Settings of `align_views`. Every length defaults to 0: derived from the views by
+/// `view_scale` (docs/alignment.md gives the rule and what it was measured on).
+struct ViewAlignParams {
+  double voxel_size = 0.0;         ///< Voxel of Algorithm 1 and of the fitness, metres; 0: derived.
+  double search_voxel_size = 0.0;  ///< Voxel of the hypotheses' placement, metres; 0: 2 voxels.
+  double voxels_across = 24.0;     ///< With voxel_size = 0: voxels across the views' typical size.
+  bool downsample = true;          ///< Downsample both views to half a voxel first (PCL VoxelGrid).
+  int bandwidth = 16;              ///< B of the EGIs and of the SO(3) search.
+  int hypotheses = 16;             ///< Rotations of the SO(3) search placed and checked, >= 1.
+  int refinements = 3;             ///< Best-checked hypotheses refined by Algorithm 1 and the
+                                   ///< ICP, in [1, hypotheses]; the best-scored one is kept.
+  int refinement_iterations = 3;   ///< Iterations of Algorithm 1 per refinement, >= 1.
+  bool icp_refinement = true;      ///< Point-to-plane ICP after Algorithm 1 (pairs within a
+                                   ///< voxel, then 0.4 voxel; Gauss-Newton), kept if it does not
+                                   ///< lower the score.
+  /// The current view's sensor origin in its coordinates: the origin for a depth
+  /// camera's cloud in its own frame. The fitness renders the reference from it.
+  Eigen::Vector3d current_viewpoint = Eigen::Vector3d::Zero();
+  double max_seconds = 0.0;  ///< Time budget, seconds (0: none); past it, the best so far,
+                             ///< converged = false.
+  int threads = 1;           ///< Threads for FFTW and the SO(3) search, in [1, 256].
+  Occupancy occupancy = Occupancy::trilinear;
+  EgiMethod egi_method = EgiMethod::projection;
+  GridLimits limits = {};  ///< Grids over limits.max_voxels are refused before allocation.
+};
+
+/// How well the current view supports a pose of the reference: the reference, moved by
+/// the pose, rendered from the current view's sensor (its nearest points facing it, in
+/// pixels of half a voxel) and each pixel compared with the current view's depth there.
+struct ViewSupport {
+  int confirmed = 0;         ///< Pixels where the current view has the surface (within one
+                             ///< voxel, normals within 45 degrees).
+  int contradicted = 0;      ///< Pixels where it saw through the reference's surface, or a
+                             ///< surface turned another way.
+  int hidden = 0;            ///< Pixels where it saw something nearer.
+  int reference_pixels = 0;  ///< Pixels of the reference's own image from its own sensor
+                             ///< that the comparison could see (in the current's field).
+  /// confirmed / (confirmed + contradicted + hidden / 2), in [0, 1].
+  double fitness = 0.0;
+  /// confirmed / reference points checked, in [0, 1]: the share of the reference that the
+  /// current view shows again (about the views' overlap for a right pose).
+  double overlap = 0.0;
+  /// fitness x overlap, in [0, 1]: what ranks the hypotheses and the refined poses.
+  double score = 0.0;
+};
+
+/// Outcome of `align_views`.
+struct ViewAlignResult {
+  Transform T_current_reference = Transform::Identity();  ///< Maps reference points into the
+                                                          ///< current view's coordinates.
+  /// The search ran to its end (every refinement within max_seconds). Whether the
+  /// answer is right is `support.score`'s to say (docs/alignment.md: its threshold).
+  bool converged = false;
+  ViewSupport support;       ///< Of the returned pose.
+  double correlation = 0.0;  ///< Normalised EGI correlation at the returned rotation.
+  ViewScale scale;           ///< The scale it worked at.
+  int hypothesis = 0;        ///< Index of the kept hypothesis (best correlated first).
+  int icp_iterations = 0;    ///< ICP steps of the kept pose (0 without, or not kept).
+  /// The checked hypotheses, best score first: T_current_reference and support.
+  std::vector<std::pair<Transform, ViewSupport>> hypotheses;
+};
+
+/// The support of a given pose, as `align_views` scores its refined poses: the views
+/// prepared (downsampled, balanced) at the scale of `params`, depths within a quarter of
+/// a voxel. For the confidence of a pose found otherwise (the servo's tracking).
+/// @throws std::invalid_argument as `align_views`, or for a pose that is not rigid.
+ViewSupport view_support(const PointCloud& reference, const PointCloud& current,
+                         const Transform& T_current_reference, const ViewAlignParams& params = {});
+
+/// Registers `reference` onto `current`, two views of one scene, both with normals
+/// (toward their sensors): the returned T_current_reference moves the reference's points
+/// onto the same surfaces in the current view. Global over rotation (the SO(3) search of
+/// the views' EGIs) and translation (phase correlation over both views), each of the
+/// best-supported hypotheses refined by Algorithm 1 on the views and a point-to-plane ICP.
+/// @throws std::invalid_argument for an empty view, missing normals, non-finite or
+///         out-of-range settings, a grid over params.limits, or views that nowhere face
+///         the current viewpoint.
+ViewAlignResult align_views(const PointCloud& reference, const PointCloud& current,
+                            const ViewAlignParams& params = {});
+
+}  // namespace spectral_vs

@@ -1,0 +1,498 @@
+// Scene-to-scene registration as a pipeline of stages: scale, preparation, hypotheses
+// (the SO(3) search of the views' EGIs, each rotation placed by phase correlation),
+// verification (the support of the current view), refinement (Algorithm 1, the ICP).
+
+#include <spectral_vs/alignment/view_aligner.hpp>
+
+#include <spectral_vs/representation/preprocessing.hpp>
+#include <spectral_vs/rotation/so3_correlation.hpp>
+#include <spectral_vs/rotation/so3_search.hpp>
+
+#include "alignment/algorithm1.hpp"
+#include "alignment/align_detail.hpp"
+#include "alignment/icp_refinement.hpp"
+#include "alignment/moving_model.hpp"
+#include "alignment/range_image.hpp"
+#include "alignment/scene_map.hpp"
+#include "common/checks.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <optional>
+
+namespace spectral_vs {
+
+using detail::fail;
+using detail::Pose;
+using detail::SceneTranslation;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Reference points the support is checked on, at most: a hashed selection beyond it (the
+// support of a pose is a share, which 4000 points measure to about 1%).
+constexpr Eigen::Index kSupportPoints = 4000;
+// Iterations of the EGI refinement of each rotation of the SO(3) search, before it is
+// placed: the grid's nodes are pi / B apart (11 degrees at B = 16).
+constexpr int kRotationRefineIterations = 20;
+// The ICP's second stage pairs within this share of a voxel (as align()'s).
+constexpr double kIcpFineDistance = 0.4;
+// The ICP's pose is kept unless it loses this much of the coarse score (as align()'s
+// fitness rule): at a voxel's tolerance a precise pose scores about as a rough one, and
+// the refined poses are compared precise.
+constexpr double kIcpScoreLoss = 0.05;
+// Translation room of Algorithm 1 around each hypothesis, in search voxels: the
+// placement is within half a search voxel, the rotation within a few degrees.
+constexpr double kRefinementRoom = 2.0;
+// Translation room of the hypotheses' placement, in view extents (ViewScale::extent).
+constexpr double kPlacementRoom = 1.0;
+// Depth tolerances of the support check, in voxels: a hypothesis is a search voxel and a
+// few degrees off, a refined pose (after the ICP) a small part of a voxel; checked that
+// closely, a pose turned about a scene's dominant plane no longer passes for the right one.
+constexpr double kCoarseTolerance = 1.0;
+// The ICP of each hypothesis before it is checked: about this many reference points (the
+// balanced view), this many Gauss-Newton steps at most.
+constexpr Eigen::Index kCoarseIcpPoints = 500;
+constexpr int kCoarseIcpIterations = 10;
+constexpr double kFineTolerance = 0.25;
+
+// A view's dominant plane (a table top, a floor): the normals within kPlaneCone of its
+// most common direction, when they are over kDominantShare of the view's. Measured on the
+// simulated table, 92% of a view's normals are the table's: the EGI is then one peak
+// that leaves the rotation about its normal unseen, and every pose that keeps the table
+// on itself passes the support check.
+constexpr double kPlaneCone = 20.0 * M_PI / 180.0;
+constexpr double kDominantShare = 0.4;
+// The translation grids hold each view without its spatial outliers: the box between
+// these per-axis quantiles, grown by this share of its diagonal.
+constexpr double kCropQuantile = 0.05;
+constexpr double kCropMargin = 0.05;
+
+void check_params(const ViewAlignParams& p) {
+  if (!(p.voxel_size >= 0.0 && std::isfinite(p.voxel_size)))
+    fail("voxel_size must be >= 0 metres (0: derived from the views), got ", p.voxel_size);
+  if (!(p.search_voxel_size >= 0.0 && std::isfinite(p.search_voxel_size)))
+    fail("search_voxel_size must be >= 0 metres (0: twice the voxel), got ", p.search_voxel_size);
+  if (!(p.voxels_across >= 4.0 && std::isfinite(p.voxels_across)))
+    fail("voxels_across must be finite and >= 4, got ", p.voxels_across);
+  if (p.bandwidth < 2 || p.bandwidth > kMaxBandwidth)
+    fail("bandwidth must be in [2, ", kMaxBandwidth, "], got ", p.bandwidth);
+  if (p.hypotheses < 1) fail("hypotheses must be >= 1, got ", p.hypotheses);
+  if (p.refinements < 1 || p.refinements > p.hypotheses)
+    fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
+  if (p.refinement_iterations < 1)
+    fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
+  if (!p.current_viewpoint.allFinite()) fail("current_viewpoint must be finite");
+  if (!(p.max_seconds >= 0.0 && std::isfinite(p.max_seconds)))
+    fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);
+  if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
+}
+
+// The settings of align() that Algorithm 1 and the phase correlation read.
+AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
+  AlignParams a;
+  a.voxel_size = scale.voxel_size;
+  a.bandwidth = p.bandwidth;
+  a.threads = p.threads;
+  a.occupancy = p.occupancy;
+  a.egi_method = p.egi_method;
+  a.limits = p.limits;
+  a.max_seconds = p.max_seconds;
+  return a;
+}
+
+// Stage: preparation. A view's dominant plane: which normals lie on it, and the weight
+// that makes it weigh as much as the rest (the EGIs and the translation grids then see
+// the structure that fixes the rotation about the plane's normal and the translation
+// along it).
+struct PlaneBalance {
+  std::vector<char> on_plane;  // per point: its normal is within kPlaneCone of the plane's
+  double plane_weight = 1.0;   // of each point on the plane; 1: no dominant plane
+  bool has_plane() const { return plane_weight < 1.0; }
+};
+
+PlaneBalance plane_balance(const Points& normals) {
+  PlaneBalance balance;
+  balance.on_plane.assign(std::size_t(normals.rows()), 0);
+  if (normals.rows() == 0) return balance;
+  std::array<int, 26> votes{};
+  for (Eigen::Index i = 0; i < normals.rows(); ++i)
+    ++votes[std::size_t(detail::normal_direction(normals.row(i).transpose()))];
+  const int mode = int(std::max_element(votes.begin(), votes.end()) - votes.begin());
+  Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
+    if (detail::normal_direction(normals.row(i).transpose()) == mode) axis += normals.row(i);
+  }
+  const double cos_cone = std::cos(kPlaneCone);
+  for (int round = 0; round < 3; ++round) {  // the mean of the normals in the cone
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    axis.normalize();
+    for (Eigen::Index i = 0; i < normals.rows(); ++i) {
+      if (normals.row(i).dot(axis) > cos_cone) sum += normals.row(i);
+    }
+    if (sum.isZero()) return balance;
+    axis = sum;
+  }
+  axis.normalize();
+  Eigen::Index on = 0;
+  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
+    balance.on_plane[std::size_t(i)] = normals.row(i).dot(axis) > cos_cone;
+    on += balance.on_plane[std::size_t(i)];
+  }
+  const Eigen::Index off = normals.rows() - on;
+  if (double(on) <= kDominantShare * double(normals.rows()) || off == 0) {
+    std::fill(balance.on_plane.begin(), balance.on_plane.end(), 0);
+    return balance;
+  }
+  balance.plane_weight = double(off) / double(on);
+  return balance;
+}
+
+// The view thinned by its balance: the points on its plane kept with the probability of
+// their weight (deterministically, by a running sum), the others all.
+PointCloud balanced(const PointCloud& view, const PlaneBalance& balance) {
+  if (!balance.has_plane()) return view;
+  std::vector<Eigen::Index> kept;
+  double carried = 0.0;
+  for (Eigen::Index i = 0; i < view.points().rows(); ++i) {
+    if (balance.on_plane[std::size_t(i)]) {
+      carried += balance.plane_weight;
+      if (carried < 1.0) continue;
+      carried -= 1.0;
+    }
+    kept.push_back(i);
+  }
+  return PointCloud(detail::rows_of(view.points(), kept), detail::rows_of(view.normals(), kept));
+}
+
+// The view without its outliers in space: the points inside its box from the
+// kCropQuantile-th to the (1 - kCropQuantile)-th quantile per axis, grown by kCropMargin
+// of that box's diagonal. A depth camera's few far returns (a floor behind the table, a
+// window) would otherwise set the size of every translation grid.
+PointCloud cropped(const PointCloud& view) {
+  const Points& points = view.points();
+  Eigen::AlignedBox3d box;
+  std::vector<double> values(std::size_t(points.rows()));
+  for (int axis = 0; axis < 3; ++axis) {
+    for (Eigen::Index i = 0; i < points.rows(); ++i) values[std::size_t(i)] = points(i, axis);
+    const auto at = [&](double q) {
+      const auto k = std::ptrdiff_t(std::floor(q * double(values.size() - 1)));
+      std::nth_element(values.begin(), values.begin() + k, values.end());
+      return values[std::size_t(k)];
+    };
+    box.min()[axis] = at(kCropQuantile);
+    box.max()[axis] = at(1.0 - kCropQuantile);
+  }
+  const double margin = kCropMargin * box.sizes().norm();
+  box.min().array() -= margin;
+  box.max().array() += margin;
+  std::vector<Eigen::Index> kept;
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    if (box.contains(points.row(i).transpose())) kept.push_back(i);
+  }
+  if (Eigen::Index(kept.size()) == points.rows()) return view;
+  return PointCloud(detail::rows_of(points, kept), detail::rows_of(view.normals(), kept));
+}
+
+// The points of the view off its dominant plane (all without one): the structure whose
+// support tells a right pose from one that only lays the plane onto itself.
+PointCloud structure(const PointCloud& view, const PlaneBalance& balance) {
+  if (!balance.has_plane()) return view;
+  std::vector<Eigen::Index> kept;
+  for (Eigen::Index i = 0; i < view.points().rows(); ++i) {
+    if (!balance.on_plane[std::size_t(i)]) kept.push_back(i);
+  }
+  return PointCloud(detail::rows_of(view.points(), kept), detail::rows_of(view.normals(), kept));
+}
+
+// Stage: verification. The reference at a pose against the current view's depth image.
+class SupportCheck {
+ public:
+  /// `current` as prepared (its depth image), `reference`: what of the reference is checked.
+  SupportCheck(const PointCloud& current, const PointCloud& reference,
+               const ViewAlignParams& params, const ViewScale& scale)
+      : image_(current, params.current_viewpoint, 0.5 * scale.voxel_size),
+        voxel_(scale.voxel_size) {
+    const Eigen::Index count = reference.points().rows();
+    const Eigen::Index stride = std::max<Eigen::Index>(1, count / kSupportPoints);
+    std::vector<Eigen::Index> rows;
+    for (Eigen::Index i = 0; i < count; i += stride) rows.push_back(i);
+    points_ = detail::rows_of(reference.points(), rows);
+    normals_ = detail::rows_of(reference.normals(), rows);
+  }
+
+  /// The support with depths within `tolerance` voxels.
+  ViewSupport of(const Transform& T_current_reference, double tolerance) {
+    const Eigen::Matrix3d R = T_current_reference.topLeftCorner<3, 3>();
+    moved_.noalias() = points_ * R.transpose();
+    moved_.rowwise() += T_current_reference.topRightCorner<3, 1>().transpose();
+    turned_.noalias() = normals_ * R.transpose();
+    const detail::ViewCheck check = image_.check(moved_, turned_, tolerance * voxel_,
+                                                 detail::RangeImage::Distance::along_normal);
+    ViewSupport support;
+    support.confirmed = check.confirmed;
+    support.contradicted = check.contradicted;
+    support.hidden = check.hidden;
+    support.reference_pixels = check.confirmed + check.contradicted + check.hidden;
+    support.fitness = check.fitness();
+    support.overlap = double(check.supported_points) / double(points_.rows());
+    support.score = support.fitness * support.overlap;
+    return support;
+  }
+
+ private:
+  detail::RangeImage image_;
+  double voxel_;
+  Points points_, normals_, moved_, turned_;
+};
+
+struct Hypothesis {
+  int index = 0;
+  Pose pose;
+  ViewSupport support;
+};
+
+// What the stages share: the prepared views and their EGI correlation.
+struct Views {
+  const PointCloud& reference;
+  const PointCloud& current;
+  const ViewAlignParams& params;
+  const AlignParams& loop;  // Algorithm 1's settings at the views' scale
+  const ViewScale& scale;
+  detail::MovingModel& model;     // the reference, moved about its centroid
+  const PointCloud& model_cloud;  // what it moves: the reference balanced
+  const detail::SceneMap& map;    // the current view, for the translation grids
+  const ShCoefficients& reference_coefficients;
+  const ShCoefficients& current_coefficients;
+  So3Correlation& correlation;
+  SupportCheck& support;
+  const detail::IcpScene& coarse_scene;  // the current view at a voxel, cells of a search voxel
+  const detail::IcpScene& fine_scene;    // the current view, cells of a voxel
+  Clock::time_point deadline;
+};
+
+bool expired(const Views& views) { return Clock::now() > views.deadline; }
+
+// Stage: hypotheses. The best rotations of the SO(3) search of the two EGIs, each refined
+// on the correlation, then placed by phase correlation over both views (the reference's
+// centroid started on the current's), and checked; best supported first.
+std::vector<Hypothesis> hypotheses(const Views& views) {
+  So3SearchParams search;
+  search.candidates = views.params.hypotheses;
+  search.threads = views.params.threads;
+  const auto candidates = so3_search(views.current_coefficients, views.reference_coefficients,
+                                     views.params.bandwidth, search);
+  const Eigen::Vector3d start = views.map.cloud().centroid();
+  // The reference's centroid started on the current's: the grid holds both views and
+  // room for the shift of two views' centroids (which a rotation of the camera moves).
+  Pose centred;
+  centred.offset = start - views.model.centroid();
+  const Points& at_start = views.model.move(centred);
+  const Eigen::AlignedBox3d start_box(at_start.colwise().minCoeff().transpose(),
+                                      at_start.colwise().maxCoeff().transpose());
+  SceneTranslation placement(views.map, start_box, kPlacementRoom * views.scale.extent,
+                             views.scale.search_voxel_size, views.params.occupancy,
+                             detail::phase_params(views.loop), views.params.limits);
+  RotationRefineParams refine;
+  refine.max_iterations = kRotationRefineIterations;
+  detail::IcpSettings coarse_icp;
+  coarse_icp.max_distance = views.scale.search_voxel_size;
+  coarse_icp.max_points = kCoarseIcpPoints;
+  coarse_icp.max_iterations = kCoarseIcpIterations;
+  coarse_icp.viewpoint = views.params.current_viewpoint;
+  std::vector<Hypothesis> out;
+  for (std::size_t h = 0; h < candidates.size(); ++h) {
+    if (h > 0 && expired(views)) break;
+    Hypothesis hypothesis;
+    hypothesis.index = int(h);
+    hypothesis.pose.R = refine_rotation(views.correlation, candidates[h].R, refine).R;
+    hypothesis.pose.offset = start - views.model.centroid();
+    hypothesis.pose.offset += placement.estimate(views.model.move(hypothesis.pose)).shift;
+    // The EGI's maximum of two partial views lies up to 10-20 degrees from the truth: a
+    // short ICP with pairs within a search voxel brings a right hypothesis close enough
+    // for the support to recognise it.
+    const detail::IcpOutcome icp =
+        detail::refine_point_to_plane(views.model_cloud, views.coarse_scene,
+                                      views.model.transform_of(hypothesis.pose), coarse_icp);
+    if (icp.iterations > 0) hypothesis.pose = views.model.pose_of(icp.T_scene_model);
+    hypothesis.support =
+        views.support.of(views.model.transform_of(hypothesis.pose), kCoarseTolerance);
+    out.push_back(hypothesis);
+  }
+  std::stable_sort(out.begin(), out.end(), [](const Hypothesis& a, const Hypothesis& b) {
+    return a.support.score > b.support.score;
+  });
+  return out;
+}
+
+// The point-to-plane ICP of a refined pose: pairs within a voxel, then within
+// kIcpFineDistance of one; kept where it does not lower the support.
+void refine_with_icp(const Views& views, ViewAlignResult& result) {
+  detail::IcpSettings icp;
+  icp.viewpoint = views.params.current_viewpoint;
+  Transform T = result.T_current_reference;
+  int iterations = 0;
+  for (const double share : {1.0, kIcpFineDistance}) {
+    icp.max_distance = share * views.scale.voxel_size;
+    const detail::IcpOutcome outcome =
+        detail::refine_point_to_plane(views.reference, views.fine_scene, T, icp);
+    if (outcome.iterations == 0) break;
+    T = outcome.T_scene_model;
+    iterations += outcome.iterations;
+  }
+  if (iterations == 0) return;
+  const ViewSupport icp_support = views.support.of(T, kCoarseTolerance);
+  if (icp_support.score >= result.support.score - kIcpScoreLoss) {
+    result.T_current_reference = T;
+    result.support = icp_support;
+    result.icp_iterations = iterations;
+  }
+}
+
+// Stage: refinement. Algorithm 1 from a hypothesis on a grid bounded around it, then
+// the point-to-plane ICP; each kept only where it does not lower the support.
+ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
+  ViewAlignResult result;
+  result.hypothesis = hypothesis.index;
+  result.T_current_reference = views.model.transform_of(hypothesis.pose);
+  result.support = hypothesis.support;
+  Pose pose = hypothesis.pose;
+  const Points& at_start = views.model.move(pose);
+  const Eigen::AlignedBox3d box(at_start.colwise().minCoeff().transpose(),
+                                at_start.colwise().maxCoeff().transpose());
+  // A hypothesis that moved the reference off the current view has nothing to refine on
+  // (and its grid, spanning both, could be of any size).
+  if (!box.intersects(bounding_box(views.map.cloud()))) return result;
+  SceneTranslation grid(views.map, box, kRefinementRoom * views.scale.search_voxel_size,
+                        views.scale.voxel_size, views.params.occupancy,
+                        detail::phase_params(views.loop), views.params.limits);
+  const detail::Algorithm1Problem loop{views.correlation,
+                                       views.current_coefficients,
+                                       views.reference_coefficients,
+                                       views.model,
+                                       views.loop,
+                                       views.deadline};
+  detail::run_algorithm1(loop, pose, grid, views.params.refinement_iterations);
+  const Transform refined = views.model.transform_of(pose);
+  const ViewSupport refined_support = views.support.of(refined, kCoarseTolerance);
+  if (refined_support.score >= result.support.score) {
+    result.T_current_reference = refined;
+    result.support = refined_support;
+  }
+  if (views.params.icp_refinement) refine_with_icp(views, result);
+  result.support = views.support.of(result.T_current_reference, kFineTolerance);
+  return result;
+}
+
+PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, double voxel_size) {
+  return params.downsample ? voxel_downsample(view, 0.5 * voxel_size) : view;
+}
+
+// The scale of view_scale, or the settings' where given.
+ViewScale scale_of(const PointCloud& reference, const PointCloud& current,
+                   const ViewAlignParams& params) {
+  ViewScale scale = view_scale(reference, current, params.voxels_across);
+  if (params.voxel_size > 0.0) {
+    scale.voxel_size = params.voxel_size;
+    scale.search_voxel_size = 2.0 * params.voxel_size;
+  }
+  if (params.search_voxel_size > 0.0) scale.search_voxel_size = params.search_voxel_size;
+  return scale;
+}
+
+void check_views(const PointCloud& reference, const PointCloud& current,
+                 const ViewAlignParams& params) {
+  require_non_empty(reference, "reference");
+  require_non_empty(current, "current");
+  require_normals(reference, "reference");
+  require_normals(current, "current");
+  check_params(params);
+}
+
+}  // namespace
+
+ViewSupport view_support(const PointCloud& reference_view, const PointCloud& current_view,
+                         const Transform& T_current_reference, const ViewAlignParams& params) {
+  check_views(reference_view, current_view, params);
+  require_rigid_transform(T_current_reference, "T_current_reference");
+  const ViewScale scale = scale_of(reference_view, current_view, params);
+  const PointCloud current = prepared(current_view, params, scale.voxel_size);
+  const PointCloud reference = prepared(reference_view, params, scale.voxel_size);
+  SupportCheck support(current, structure(reference, plane_balance(reference.normals())), params,
+                       scale);
+  return support.of(T_current_reference, kFineTolerance);
+}
+
+ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& current_view,
+                            const ViewAlignParams& params) {
+  check_views(reference_view, current_view, params);
+  const Clock::time_point started = Clock::now();
+  const ViewScale scale = scale_of(reference_view, current_view, params);
+  const AlignParams loop = loop_params(params, scale);
+
+  // Stage: preparation.
+  const PointCloud reference = prepared(reference_view, params, scale.voxel_size);
+  const PointCloud current = prepared(current_view, params, scale.voxel_size);
+  const PlaneBalance reference_balance = plane_balance(reference.normals());
+  const PointCloud reference_balanced = cropped(balanced(reference, reference_balance));
+  const PointCloud current_balanced = cropped(balanced(current, plane_balance(current.normals())));
+  detail::MovingModel model(reference_balanced);
+  const detail::SceneMap map(current_balanced, current_balanced, scale.voxel_size, params.limits);
+  const ShCoefficients reference_coefficients =
+      egi_coefficients(reference_balanced, params.bandwidth, params.egi_method);
+  const ShCoefficients current_coefficients =
+      egi_coefficients(current_balanced, params.bandwidth, params.egi_method);
+  So3Correlation correlation(current_coefficients, reference_coefficients, params.bandwidth, true);
+  SupportCheck support(current, structure(reference, reference_balance), params, scale);
+  // The ICP's neighbour grids, made once: cells as wide as the pairs' distance (wider
+  // cells hold more points to try per query), the hypotheses' on the view at a voxel.
+  Eigen::AlignedBox3d around = bounding_box(current);
+  around.min().array() -= 2.0 * scale.search_voxel_size;
+  around.max().array() += 2.0 * scale.search_voxel_size;
+  const PointCloud current_coarse = voxel_downsample(current, scale.voxel_size);
+  const detail::IcpScene coarse_scene(current_coarse, around, scale.search_voxel_size);
+  const detail::IcpScene fine_scene(current, around, scale.voxel_size);
+  const Views views{reference,
+                    current,
+                    params,
+                    loop,
+                    scale,
+                    model,
+                    reference_balanced,
+                    map,
+                    reference_coefficients,
+                    current_coefficients,
+                    correlation,
+                    support,
+                    coarse_scene,
+                    fine_scene,
+                    detail::deadline_of(loop, started)};
+
+  const std::vector<Hypothesis> ranked = hypotheses(views);
+  ViewAlignResult best;
+  const int runs = std::min<int>(params.refinements, int(ranked.size()));
+  bool in_time = true;
+  for (int i = 0; i < runs && in_time; ++i) {
+    ViewAlignResult result = refine(views, ranked[std::size_t(i)]);
+    if (i == 0 || result.support.score > best.support.score) best = std::move(result);
+    in_time = !expired(views);
+  }
+  if (best.support.confirmed == 0 && in_time) {
+    fail(
+        "reference, current: the views share no surface: no pose of the reference that the "
+        "search tried is supported anywhere in the current view");
+  }
+  best.converged = in_time && int(ranked.size()) == params.hypotheses;
+  best.scale = scale;
+  best.correlation =
+      correlation.evaluate(Eigen::Matrix3d(best.T_current_reference.topLeftCorner<3, 3>())).value;
+  for (const Hypothesis& h : ranked) {
+    best.hypotheses.emplace_back(model.transform_of(h.pose), h.support);
+  }
+  return best;
+}
+
+}  // namespace spectral_vs

@@ -1,0 +1,92 @@
+"""Scene-to-scene registration from Python: two views of one scene, registered globally.
+
+The reference view (the desired camera's cloud in direct visual servoing) is registered
+onto the current view: ``T_current_reference`` moves the reference's points onto the same
+surfaces in the current view's coordinates. Every length is derived from the views
+(:func:`spectral_vs.view_scale`) unless given; docs/alignment.md has the rule.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from spectral_vs._core import (
+    PointCloud,
+    ViewAlignParams,
+    ViewAlignResult,
+    estimate_normals,
+)
+from spectral_vs._core import align_views as _align_views
+from spectral_vs.registration import CloudLike, as_cloud, check_viewpoint
+
+#: Neighbours of an estimated normal's plane fit: a count, not a radius, because a depth
+#: camera's point spacing grows with the square of the depth (2 mm at 1 m, 50 mm at 10 m).
+NORMAL_NEIGHBORS = 20
+
+
+def _view(cloud: CloudLike, argument: str, viewpoint: Any) -> PointCloud:
+    view = as_cloud(cloud, argument)
+    if len(view) == 0:
+        raise ValueError(f"{argument} is empty: at least 1 finite point is needed")
+    if not view.has_normals:
+        view = estimate_normals(view, k_neighbors=NORMAL_NEIGHBORS, viewpoint=viewpoint)
+    return view
+
+
+def align_views(
+    reference: CloudLike,
+    current: CloudLike,
+    params: ViewAlignParams | None = None,
+    *,
+    current_viewpoint: Any = (0.0, 0.0, 0.0),
+    reference_viewpoint: Any = (0.0, 0.0, 0.0),
+    **overrides: Any,
+) -> ViewAlignResult:
+    """Register the ``reference`` view onto the ``current`` view of the same scene.
+
+    Parameters
+    ----------
+    reference, current : PointCloud or ndarray
+        The two views, metres, as :class:`PointCloud` or (N, 3) / (N, 6) arrays (points,
+        normals). Missing normals are estimated (20 nearest neighbours) and turned toward
+        the view's sensor.
+    params : ViewAlignParams, optional
+        Settings; defaults to ``ViewAlignParams()`` (every length derived from the views).
+    current_viewpoint : array_like (3,)
+        The current view's sensor origin in its coordinates, metres: the origin for a
+        depth camera's cloud in its own frame. The support check renders from it.
+    reference_viewpoint : array_like (3,)
+        The reference view's sensor origin, metres; used only to orient estimated normals.
+    **overrides
+        Any :class:`ViewAlignParams` field, e.g. ``hypotheses=24, voxel_size=0.02``.
+
+    Returns
+    -------
+    ViewAlignResult
+        ``T_current_reference`` (4 x 4), ``support`` (its ``score`` in [0, 1] separates
+        right from wrong poses: docs/alignment.md), ``converged``, the ``scale`` used and
+        every checked hypothesis.
+
+    Raises
+    ------
+    ValueError
+        For an empty view, an array of the wrong shape, non-finite coordinates, a
+        viewpoint that is not 3 finite numbers, an unknown or out-of-range setting, a grid
+        over ``max_voxels``, or views that share nothing (no pose of the reference is
+        supported anywhere by the current view); the message names the argument.
+    TypeError
+        For ``params`` that is not a :class:`ViewAlignParams`.
+    """
+    if params is not None and not isinstance(params, ViewAlignParams):
+        raise TypeError(f"params must be a ViewAlignParams, got {type(params).__name__}")
+    settings = copy.copy(params) if params is not None else ViewAlignParams()
+    for name, value in overrides.items():
+        if not hasattr(settings, name) or name.startswith("_"):
+            raise ValueError(f"unknown view alignment setting {name!r}")
+        setattr(settings, name, value)
+    current_origin = check_viewpoint(current_viewpoint)
+    settings.current_viewpoint = current_origin
+    reference_view = _view(reference, "reference", check_viewpoint(reference_viewpoint))
+    current_view = _view(current, "current", current_origin)
+    return _align_views(reference_view, current_view, settings)

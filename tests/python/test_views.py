@@ -1,0 +1,109 @@
+"""Scene-to-scene registration (spectral_vs.align_views) on view pairs cut from a real
+Kinect scan (spectral_vs.data): the current view's pixels disjoint from the reference's,
+moved by a known transform."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import spectral_vs as svs
+from spectral_vs import data
+
+
+def rotation_error_deg(T_true: np.ndarray, T: np.ndarray) -> float:
+    R = np.linalg.inv(T_true)[:3, :3] @ np.asarray(T)[:3, :3]
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+
+
+@pytest.fixture(scope="module")
+def table_pairs(data_dir):
+    scan = svs.load_organized(data_dir / "milk_cartoon_all_small_clorox.pcd")
+    return data.view_pairs(scan, 4, downscale=2, seed=7)
+
+
+def test_view_pairs_of_a_table_are_registered_within_2_mm_and_half_a_degree(table_pairs):
+    for pair in table_pairs:
+        result = svs.align_views(
+            pair.reference, pair.current, current_viewpoint=pair.current_viewpoint
+        )
+        T = result.T_current_reference
+        assert rotation_error_deg(pair.T_current_reference, T) < 0.5
+        assert np.linalg.norm(T[:3, 3] - pair.T_current_reference[:3, 3]) < 0.002  # m
+        assert result.converged
+        assert result.support.score > 0.1
+        # The kept pose is the best supported of the hypotheses' refinements: none of the
+        # checked hypotheses (coarse poses) scores higher at the fine tolerance.
+        assert len(result.hypotheses) == 16
+
+
+def test_support_separates_the_truth_from_a_pose_5_degrees_off(table_pairs):
+    pair = table_pairs[0]
+    params = svs.ViewAlignParams(current_viewpoint=pair.current_viewpoint)
+    truth = svs.view_support(pair.reference, pair.current, pair.T_current_reference, params)
+    off = pair.T_current_reference.copy()
+    angle = np.radians(5.0)
+    off[:3, :3] = off[:3, :3] @ np.array(
+        [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+    )
+    wrong = svs.view_support(pair.reference, pair.current, off, params)
+    assert truth.score > 2 * wrong.score
+    assert truth.score == pytest.approx(truth.fitness * truth.overlap, rel=1e-12)
+
+
+def test_arrays_without_normals_are_accepted(table_pairs):
+    pair = table_pairs[1]
+    result = svs.align_views(
+        np.asarray(pair.reference.points),
+        np.asarray(pair.current.points),
+        current_viewpoint=pair.current_viewpoint,
+    )
+    T = result.T_current_reference
+    assert rotation_error_deg(pair.T_current_reference, T) < 1.0
+    assert np.linalg.norm(T[:3, 3] - pair.T_current_reference[:3, 3]) < 0.005  # m
+
+
+def test_the_scale_is_derived_from_the_views_or_given(table_pairs):
+    pair = table_pairs[0]
+    scale = svs.view_scale(pair.reference, pair.current)
+    points = np.asarray(pair.current.points)
+    typical = 2 * np.median(np.linalg.norm(points - np.median(points, axis=0), axis=1))
+    assert scale.extent >= typical * 0.999  # the larger of the two views'
+    assert scale.voxel_size == pytest.approx(max(scale.extent / 24, 3 * scale.extent / 100))
+    given = svs.align_views(
+        pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, voxel_size=0.03
+    )
+    assert given.scale.voxel_size == 0.03
+    assert given.scale.search_voxel_size == 0.06
+
+
+def test_settings_take_keywords_and_show_every_field():
+    params = svs.ViewAlignParams(hypotheses=24, refinements=4, current_viewpoint=(0, 0.1, 0))
+    assert params.hypotheses == 24 and params.refinements == 4
+    np.testing.assert_array_equal(params.current_viewpoint, [0, 0.1, 0])
+    text = repr(params)
+    for name in ("voxel_size", "hypotheses", "refinements", "current_viewpoint", "threads"):
+        assert name in text
+    assert copy.copy(params).hypotheses == 24
+    with pytest.raises(TypeError, match="no setting 'hypothesis'"):
+        svs.ViewAlignParams(hypothesis=3)
+
+
+def test_bad_input_names_the_argument(table_pairs):
+    pair = table_pairs[0]
+    with pytest.raises(ValueError, match="reference is empty"):
+        svs.align_views(np.zeros((0, 3)), pair.current)
+    with pytest.raises(ValueError, match="current must be a PointCloud or an"):
+        svs.align_views(pair.reference, np.zeros((10, 4)))
+    with pytest.raises(ValueError, match="viewpoint must be 3 finite numbers"):
+        svs.align_views(pair.reference, pair.current, current_viewpoint=(0, np.nan, 0))
+    with pytest.raises(ValueError, match="unknown view alignment setting 'hypothesis'"):
+        svs.align_views(pair.reference, pair.current, hypothesis=3)
+    with pytest.raises(ValueError, match="refinements must be in"):
+        svs.align_views(pair.reference, pair.current, refinements=99)
+    with pytest.raises(ValueError, match="max_voxels"):
+        svs.align_views(pair.reference, pair.current, voxel_size=0.01, max_voxels=1000)
+    with pytest.raises(TypeError, match="ViewAlignParams"):
+        svs.align_views(pair.reference, pair.current, params=svs.AlignParams())
