@@ -53,9 +53,11 @@ from spectral_vs._core import (
     PointCloud,
     So3Correlation,
     VelocityCommandParams,
+    ViewAlignParams,
     egi_coefficients,
     voxel_downsample,
 )
+from spectral_vs._core import align_views as _align_views
 from spectral_vs.registration import CloudLike, as_cloud, prepare
 from spectral_vs.robot import RobotInterface
 from spectral_vs.sensor_faults import frame_fingerprint, near_occluders
@@ -285,6 +287,21 @@ class ServoParams:
         trip the watchdog, or if its fitness over the reference's visible part (fitness /
         (1 - hidden share)) is below ``watchdog_fitness``; otherwise the servo moves on the
         registration of the rest.
+    relocalize : bool
+        Register the reference onto the current view globally
+        (:func:`spectral_vs.align_views`: any rotation, any translation within the views)
+        when the servo has no trusted estimate: at its first step, and at the step after a
+        registration whose fitness was below ``relocalize_fitness`` (the view moved far, or
+        the estimate slid off). The global result, if its support score reaches
+        ``relocalize_score``, becomes the estimate the step's cheap registration starts
+        from; from then on every registration starts from the last estimate carried along
+        the camera's measured motion (the warm start), so the servo tracks it.
+    relocalize_fitness : float
+        A registration with a fitness below this is poor: the next step relocalizes, in
+        [0, 1].
+    relocalize_score : float
+        Least support score (:class:`spectral_vs.ViewSupport`) of a global registration
+        that the servo takes, in [0, 1]; below it the step goes on from its own estimate.
     plane_turn : bool
         Turn each estimate about the reference's dominant normal (a table top's) by the
         step that ascends the correlation of the EGIs without that plane: a Newton step
@@ -316,6 +333,9 @@ class ServoParams:
         axis (far from the goal it turned a large start the wrong way).
     align_overrides : dict
         Further :class:`AlignParams` fields, e.g. ``{"threads": 2}``.
+    view_overrides : dict
+        :class:`spectral_vs.ViewAlignParams` fields of the relocalization, e.g.
+        ``{"hypotheses": 24}`` (by default every length is derived from the views).
     """
 
     voxel_size: float = 0.015
@@ -344,6 +364,9 @@ class ServoParams:
     max_outage: float = 0.5
     occlusion_margin: float = 0.05
     occlusion_min_share: float = 0.01
+    relocalize: bool = True
+    relocalize_fitness: float = 0.5
+    relocalize_score: float = 0.05
     plane_turn: bool = True
     plane_cone: float = math.radians(20.0)
     min_plane_share: float = 0.3
@@ -351,6 +374,7 @@ class ServoParams:
     plane_turn_stride: int = 4
     plane_turn_tilt: float = math.radians(5.0)
     align_overrides: dict[str, Any] = field(default_factory=dict)
+    view_overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.mode not in ("iteration", "pose"):
@@ -387,6 +411,9 @@ class ServoParams:
             raise ValueError(f"step_tolerance must be >= 0, got {self.step_tolerance}")
         if not 0.0 <= self.min_fitness <= 1.0:
             raise ValueError(f"min_fitness must be in [0, 1], got {self.min_fitness}")
+        for name in ("relocalize_fitness", "relocalize_score"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         if not 0.0 < self.plane_cone < math.pi / 2:
             raise ValueError(f"plane_cone must be in (0, pi/2) rad, got {self.plane_cone}")
         if not 0.0 <= self.min_plane_share <= 1.0:
@@ -541,6 +568,10 @@ class ServoRecord:
         could be (``ServoParams.occlusion_margin``); 0 when the occluder test did not run.
     hidden_share : float
         Share of the reference that those occluders hide, in [0, 1].
+    relocalized : bool
+        The step started from a global registration (``ServoParams.relocalize``).
+    relocalization_score : float
+        Support score of the global registration tried this step (NaN when none was).
     """
 
     step: int
@@ -569,6 +600,8 @@ class ServoRecord:
     outage: float = 0.0
     occluded_points: int = 0
     hidden_share: float = 0.0
+    relocalized: bool = False
+    relocalization_score: float = math.nan
 
 
 @dataclass
@@ -829,7 +862,11 @@ class SpectralServo:
                 f"{self.params.min_points}"
             )
         self._align_params = self.params.align_params()
+        self._view_params = ViewAlignParams(**self.params.view_overrides)
+        self._reference_view = cloud if cloud.has_normals else None
         self.reference = self._prepare(cloud, "reference")
+        if self._reference_view is None:
+            self._reference_view = self.reference
         # The reference's side of the registration (its EGI coefficients, centred points)
         # is prepared once here; each step adds only the current cloud's work.
         self._aligner = ModelAligner(self.reference, self._align_params)
@@ -856,6 +893,8 @@ class SpectralServo:
         self._previous: np.ndarray | None = None
         self._armed = False
         self._steps = 0
+        self._anchored = False  # a global registration was taken: registrations warm-start
+        self._lost = True  # no trusted estimate: the next step relocalizes
         self._reset_faults()
 
     def _reset_faults(self) -> None:
@@ -894,6 +933,8 @@ class SpectralServo:
         self._armed = False
         self._steps = 0
         self._last_turn = 0.0
+        self._anchored = False
+        self._lost = True
         self._reset_faults()
 
     @property
@@ -1067,8 +1108,11 @@ class SpectralServo:
                     )
                     return self._hold(record, "occluded", message, now, start)
 
+        if p.relocalize and self._lost:
+            self._relocalize(cloud, record)
+            motion = self._motion
         guess = None
-        if p.warm_start and self._previous is not None:
+        if (p.warm_start or self._anchored) and self._previous is not None:
             guess = self._predicted(motion)
         tracking = self._can_track(guess, motion)
         if tracking:
@@ -1115,6 +1159,7 @@ class SpectralServo:
         self._motion = np.eye(4)
         self._outage_start = now
         self._armed = self._armed or record.fitness >= p.watchdog_fitness
+        self._lost = record.fitness < p.relocalize_fitness
 
         if self._converged(record):
             record.status = _converged_status(t_err, r_err)
@@ -1122,6 +1167,25 @@ class SpectralServo:
             record.twist, record.saturation = self.twist(T)
         record.seconds = time.perf_counter() - start
         return record.twist, record.status, record
+
+    def _relocalize(self, cloud: PointCloud, record: ServoRecord) -> None:
+        """The global registration of the reference onto ``cloud`` (cropped, as captured):
+        taken as the previous estimate when its support reaches ``relocalize_score``."""
+        try:
+            result = _align_views(self._reference_view, cloud, self._view_params)
+        except ValueError as error:
+            if "share no surface" not in str(error):
+                raise
+            record.relocalization_score = 0.0  # nothing of the reference in view: go on
+            return
+        record.relocalization_score = float(result.support.score)
+        if result.support.score < self.params.relocalize_score:
+            return
+        record.relocalized = True
+        self._previous = np.asarray(result.T_current_reference)
+        self._motion = np.eye(4)
+        self._anchored = True
+        self._lost = False
 
     def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:
         """Add the camera's motion since the previous step (identity when not given) to the

@@ -3,7 +3,7 @@
 The reference view (the desired camera's cloud in direct visual servoing) is registered
 onto the current view: ``T_current_reference`` moves the reference's points onto the same
 surfaces in the current view's coordinates. Every length is derived from the views
-(:func:`spectral_vs.view_scale`) unless given; docs/alignment.md has the rule.
+(:func:`spectral_vs.view_scale`) unless given; docs/views.md has the rule.
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ def align_views(
     -------
     ViewAlignResult
         ``T_current_reference`` (4 x 4), ``support`` (its ``score`` in [0, 1] separates
-        right from wrong poses: docs/alignment.md), ``converged``, the ``scale`` used and
+        right from wrong poses: docs/views.md), ``converged``, the ``scale`` used and
         every checked hypothesis.
 
     Raises

@@ -66,6 +66,9 @@ constexpr double kFineTolerance = 0.25;
 // on itself passes the support check.
 constexpr double kPlaneCone = 20.0 * M_PI / 180.0;
 constexpr double kDominantShare = 0.4;
+// ... and only when the rest is at least this share: a view of little but the plane has
+// no structure to weigh it against.
+constexpr double kMinStructureShare = 0.005;
 // The translation grids hold each view without its spatial outliers: the box between
 // these per-axis quantiles, grown by this share of its diagonal.
 constexpr double kCropQuantile = 0.05;
@@ -143,7 +146,8 @@ PlaneBalance plane_balance(const Points& normals) {
     on += balance.on_plane[std::size_t(i)];
   }
   const Eigen::Index off = normals.rows() - on;
-  if (double(on) <= kDominantShare * double(normals.rows()) || off == 0) {
+  if (double(on) <= kDominantShare * double(normals.rows()) ||
+      double(off) < kMinStructureShare * double(normals.rows())) {
     std::fill(balance.on_plane.begin(), balance.on_plane.end(), 0);
     return balance;
   }
@@ -193,6 +197,8 @@ PointCloud cropped(const PointCloud& view) {
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     if (box.contains(points.row(i).transpose())) kept.push_back(i);
   }
+  // Per-axis quantiles of a few points can leave a box that holds few of them.
+  if (2 * kept.size() < std::size_t(points.rows())) return view;
   if (Eigen::Index(kept.size()) == points.rows()) return view;
   return PointCloud(detail::rows_of(points, kept), detail::rows_of(view.normals(), kept));
 }

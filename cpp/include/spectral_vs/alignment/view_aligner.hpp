@@ -27,15 +27,15 @@ struct ViewScale {
 /// points from their median: where most of a depth camera's points are, not the box of
 /// its few far returns) and N the smaller view's points (a surface of N points spans
 /// about extent / sqrt(N) between neighbours: a sparse view gets voxels that hold
-/// several points). The search voxel is twice the voxel. Measured in docs/alignment.md:
-/// 24 voxels across registered the tuning pairs as well as 40 at a fifth of the time.
+/// several points). The search voxel is twice the voxel (docs/views.md: the rule and
+/// the measurement behind the default of 24 voxels across).
 /// @throws std::invalid_argument for an empty view, views of one point, or
 ///         voxels_across < 4.
 ViewScale view_scale(const PointCloud& reference, const PointCloud& current,
                      double voxels_across = 24.0);
 
 /// Settings of `align_views`. Every length defaults to 0: derived from the views by
-/// `view_scale` (docs/alignment.md gives the rule and what it was measured on).
+/// `view_scale` (docs/views.md gives the rule and what it was measured on).
 struct ViewAlignParams {
   double voxel_size = 0.0;         ///< Voxel of Algorithm 1 and of the fitness, metres; 0: derived.
   double search_voxel_size = 0.0;  ///< Voxel of the hypotheses' placement, metres; 0: 2 voxels.
@@ -84,8 +84,8 @@ struct ViewSupport {
 struct ViewAlignResult {
   Transform T_current_reference = Transform::Identity();  ///< Maps reference points into the
                                                           ///< current view's coordinates.
-  /// The search ran to its end (every refinement within max_seconds). Whether the
-  /// answer is right is `support.score`'s to say (docs/alignment.md: its threshold).
+  /// The search ran to its end (every hypothesis and refinement within max_seconds).
+  /// Whether the answer is right is `support.score`'s to say (docs/views.md measures it).
   bool converged = false;
   ViewSupport support;       ///< Of the returned pose.
   double correlation = 0.0;  ///< Normalised EGI correlation at the returned rotation.
