@@ -47,6 +47,7 @@ class PointCloud:
     @property
     def has_normals(self) -> bool: ...
     def centroid(self) -> _Array: ...  # (3,), metres
+    def select(self, keep: npt.ArrayLike) -> PointCloud: ...  # keep: (N,) bool
     def transformed(self, T_target_source: npt.ArrayLike) -> PointCloud: ...  # (4, 4) rigid
 
 class CloudFileInfo:

@@ -879,9 +879,7 @@ class SpectralServo:
         points = np.asarray(cloud.points)
         if points[:, 2].max() <= self.params.max_depth:  # the usual case, without a mask
             return cloud
-        keep = points[:, 2] <= self.params.max_depth
-        normals = cloud.normals
-        return PointCloud(points[keep], None if normals is None else np.asarray(normals)[keep])
+        return cloud.select(points[:, 2] <= self.params.max_depth)  # copied in the core
 
     def _prepare(self, cloud: PointCloud, argument: str) -> PointCloud:
         """The cloud downsampled to ``downsample_size``, with normals."""
