@@ -38,10 +38,20 @@ and repeats is reported, in ms:
   tracking bound is used where that estimate qualifies (near the goal; the share of the
   views where it was used is printed, ``tracking_share`` in the JSON).
 
+Closed loop (``--sets``): the servo runs of ``spectral-vs servo-sim`` (kinematic iiwa,
+control period 0.1 s, 150 steps at most) from the first ``--set-starts`` starts of each
+set, every ``SpectralServo.step_record`` timed with ``time.process_time`` and split into
+its stages (the servo's methods and the aligners wrapped by timers; the aligners' own
+parts from ``ModelAligner.last_timings``): the median and 95th percentile over all steps
+of the set, per stage and for the whole step (``closed_loop`` in the JSON), and the runs'
+outcomes.
+
 Usage::
 
     OMP_NUM_THREADS=1 python benchmarks/servo_step_benchmark.py            # about 2 min
     OMP_NUM_THREADS=1 python benchmarks/servo_step_benchmark.py --write  # + its JSON
+    OMP_NUM_THREADS=1 python benchmarks/servo_step_benchmark.py --sets moderate large \
+        --set-starts 20 --write                                          # about 6 min
 
 Needs pybullet.
 """
@@ -267,14 +277,148 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+#: Methods of SpectralServo timed in the closed loop, and their stage names.
+SERVO_STAGES = {
+    "_crop": "crop (max_depth)",
+    "_stale": "stale-frame test (fingerprint)",
+    "_prepare": "voxel downsampling",
+    "twist": "control law",
+}
+
+
+class _TimedAligner:
+    """A ModelAligner whose ``align`` adds its CPU time and parts to ``times``."""
+
+    def __init__(self, aligner: Any, name: str, times: dict[str, float]) -> None:
+        self._aligner, self._name, self._times = aligner, name, times
+
+    def align(self, *args: Any) -> Any:
+        start = time.process_time()
+        result = self._aligner.align(*args)
+        self._times[self._name] = self._times.get(self._name, 0.0) + time.process_time() - start
+        for part in TIMED_PARTS:
+            key = f"  {part}"
+            self._times[key] = self._times.get(key, 0.0) + getattr(self._aligner.last_timings, part)
+        return result
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._aligner, name)
+
+
+def _timed(owner: Any, name: str, stage: str, times: dict[str, float]) -> None:
+    """Wrap ``owner.name`` so that each call adds its CPU time to ``times[stage]``."""
+    function = getattr(owner, name)
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        start = time.process_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            times[stage] = times.get(stage, 0.0) + time.process_time() - start
+
+    setattr(owner, name, timed)
+
+
+def closed_loop(set_name: str, count: int, seed: int) -> dict[str, Any]:
+    """The servo-sim runs of one start set with every step's stages timed (CPU, ms)."""
+    steps: list[dict[str, float]] = []
+    runs = []
+    with sim.PyBulletRobot(sim.SimParams()) as robot:
+        reference = robot.capture()
+        T_world_reference = robot.camera_pose()
+        starts = servo_lib.start_poses(robot.kinematics, set_name, count, seed)
+        for q, _, _ in starts:
+            robot.reset_joint_positions(q)
+            servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams())
+            times: dict[str, float] = {}
+            for method, stage in SERVO_STAGES.items():
+                _timed(servo, method, stage, times)
+            _timed(servo_lib, "near_occluders", "occluder test", times)
+            if getattr(servo, "_plane_turn", None) is not None:
+                _timed(servo._plane_turn, "turn", "plane turn", times)
+            servo._aligner = _TimedAligner(servo._aligner, "registration", times)
+            if getattr(servo, "_tracking_aligner", None) is not None:
+                servo._tracking_aligner = _TimedAligner(
+                    servo._tracking_aligner, "registration, tracking bound", times
+                )
+            step_record = servo.step_record
+
+            def timed_step(*args: Any, _step: Any = step_record, _t: Any = times, **kw: Any) -> Any:
+                _t.clear()
+                start = time.process_time()
+                out = _step(*args, **kw)
+                total = time.process_time() - start
+                steps.append({**_t, "servo step (step_record)": total})
+                return out
+
+            servo.step_record = timed_step
+            log = servo_lib.run_servo(robot, robot.kinematics, servo, dt=0.1, max_steps=150)
+            servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
+            final_t, final_r = servo_lib.pose_error(
+                np.linalg.inv(robot.camera_pose()) @ T_world_reference
+            )
+            runs.append(
+                {
+                    "reason": log.reason,
+                    "steps": len(log.records),
+                    "final_mm": 1000 * final_t,
+                    "final_deg": math.degrees(final_r),
+                }
+            )
+    names = sorted({name for step in steps for name in step})
+    stages = {}
+    for name in names:
+        values = np.array([1000.0 * step.get(name, 0.0) for step in steps])
+        used = values[values > 0]
+        stages[name] = {
+            "median": float(np.median(values)),
+            "p95": float(np.percentile(values, 95)),
+            "median_when_run": float(np.median(used)) if len(used) else 0.0,
+            "share_run": float(len(used) / len(values)),
+        }
+    converged = [r for r in runs if r["reason"] == "converged"]
+    return {"steps": len(steps), "stages_ms": stages, "runs": runs, "converged": len(converged)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--starts", type=int, default=3, help="moderate starts (default 3)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeats", type=int, default=15, help="timed runs per view")
     parser.add_argument("--write", action="store_true", help="write results/servo_step.json")
+    parser.add_argument(
+        "--sets",
+        nargs="*",
+        default=[],
+        choices=["moderate", "large", "extreme"],
+        help="also time the closed-loop servo-sim runs of these start sets",
+    )
+    parser.add_argument("--set-starts", type=int, default=20, help="starts per set (20)")
+    parser.add_argument("--skip-views", action="store_true", help="only the closed loop")
     args = parser.parse_args()
-    results = run(args)
+    results = {} if args.skip_views else run(args)
+    if args.sets:
+        results.setdefault("machine", report_lib.machine())
+        results.setdefault("commit", report_lib.commit())
+        results["closed_loop"] = {}
+        for set_name in args.sets:
+            loop = closed_loop(set_name, args.set_starts, args.seed)
+            results["closed_loop"][set_name] = loop
+            print(
+                f"{set_name}: {loop['steps']} steps, {loop['converged']} of "
+                f"{len(loop['runs'])} runs converged; CPU ms per step (median / p95):"
+            )
+            for name, value in loop["stages_ms"].items():
+                print(
+                    f"  {name:<34} {value['median']:7.2f} {value['p95']:7.2f}"
+                    f"   (run in {100 * value['share_run']:.0f}% of steps)"
+                )
+        if args.skip_views:
+            if args.write:
+                path = RESULTS.with_name("servo_step_closed_loop.json")
+                path.write_text(json.dumps(report_lib.rounded(results), indent=1) + "\n")
+                print(f"wrote {path}")
+            return
     print(f"{results['machine']}, commit {results['commit']}")
     print(
         f"reference: {results['reference_points']} points, "

@@ -219,6 +219,56 @@ max_voxels : int
         return out.str();
       });
 
+  py::class_<AxisRotationStep>(m, "AxisRotationStep",
+                               "One rotation step of Algorithm 1 about one axis.")
+      .def_readonly("turn", &AxisRotationStep::turn,
+                    "The step, radians about the axis (R <- R exp(turn hat(axis))).")
+      .def_readonly("slope", &AxisRotationStep::slope, "dC/dtheta at R, per radian.")
+      .def_readonly("curvature", &AxisRotationStep::curvature,
+                    "d2C/dtheta2 at R, per radian^2 (0 with the gradient law).")
+      .def_readonly("newton", &AxisRotationStep::newton,
+                    "True for the Newton step (C concave along the axis).")
+      .def_readonly("capped", &AxisRotationStep::capped,
+                    "True when the step was cut to max_rotation_step.")
+      .def("__repr__", [](const AxisRotationStep& s) {
+        std::ostringstream out;
+        out << "AxisRotationStep(turn=" << s.turn << ", slope=" << s.slope
+            << ", curvature=" << s.curvature << ", newton=" << (s.newton ? "True" : "False")
+            << ", capped=" << (s.capped ? "True" : "False") << ")";
+        return out.str();
+      });
+
+  m.def(
+      "rotation_step_about",
+      [](So3Correlation& correlation, const Eigen::Matrix3d& R, const Eigen::Vector3d& axis,
+         const AlignParams& params) {
+        py::gil_scoped_release release;
+        return rotation_step_about(correlation, R, axis, params);
+      },
+      py::arg("correlation"), py::arg("R"), py::arg("axis"), py::arg("params"), R"doc(
+The rotation law of Algorithm 1 restricted to turns R @ expm(theta hat(axis)).
+
+The Newton step -rotation_gain slope / curvature where the correlation is concave along
+the axis, else the gradient law rotation_gain slope (``params.rotation_step``), capped at
+``params.max_rotation_step``: what ``align`` steps, in one dimension.
+
+Parameters
+----------
+correlation : So3Correlation
+    The EGI correlation (scene as target, model as model).
+R : array_like of float, shape (3, 3)
+    The rotation to step from (a rotation matrix).
+axis : array_like of float, shape (3,)
+    Direction of the turn in the model's frame (normalised here; not zero).
+params : AlignParams
+    rotation_step, rotation_gain and max_rotation_step are used.
+
+Returns
+-------
+AxisRotationStep
+    ``turn`` (rad), ``slope``, ``curvature``, ``newton``, ``capped``.
+)doc");
+
   m.def("_align", &align, py::arg("model"), py::arg("scene"), py::arg("params"),
         py::call_guard<py::gil_scoped_release>(),
         "Algorithm 1 on clouds with normals; see spectral_vs.align.");

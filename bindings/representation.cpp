@@ -93,6 +93,20 @@ drop_non_finite : bool
       .def_property_readonly("has_normals", &PointCloud::has_normals)
       .def("centroid", &PointCloud::centroid, "Mean of the points, metres.")
       .def(
+          "select",
+          [](const PointCloud& cloud, const py::array_t<bool, py::array::c_style>& keep) {
+            if (keep.ndim() != 1 || std::size_t(keep.shape(0)) != cloud.size()) {
+              throw py::value_error("keep must be a boolean array of shape (" +
+                                    std::to_string(cloud.size()) + ",), one entry per point");
+            }
+            std::vector<char> flags(keep.data(), keep.data() + keep.shape(0));
+            py::gil_scoped_release release;
+            return cloud.selected(flags);
+          },
+          py::arg("keep"),
+          "The points (and normals) where the boolean array keep is True, in order: a copy "
+          "made in the core, without the checks of the constructor.")
+      .def(
           "transformed",
           [](const PointCloud& cloud, const py::handle& T) {
             return cloud.transformed(to_transform(T, "T_target_source"));

@@ -47,6 +47,7 @@ class PointCloud:
     @property
     def has_normals(self) -> bool: ...
     def centroid(self) -> _Array: ...  # (3,), metres
+    def select(self, keep: npt.ArrayLike) -> PointCloud: ...  # keep: (N,) bool
     def transformed(self, T_target_source: npt.ArrayLike) -> PointCloud: ...  # (4, 4) rigid
 
 class CloudFileInfo:
@@ -379,6 +380,23 @@ class AlignResult:
     @property
     def history(self) -> list[AlignIteration]: ...
 
+class AxisRotationStep:
+    """One rotation step of Algorithm 1 about one axis (rotation_step_about)."""
+
+    @property
+    def turn(self) -> float: ...  # rad about the axis
+    @property
+    def slope(self) -> float: ...  # dC/dtheta, per rad
+    @property
+    def curvature(self) -> float: ...  # d2C/dtheta2, per rad^2
+    @property
+    def newton(self) -> bool: ...
+    @property
+    def capped(self) -> bool: ...
+
+def rotation_step_about(
+    correlation: So3Correlation, R: npt.ArrayLike, axis: npt.ArrayLike, params: AlignParams
+) -> AxisRotationStep: ...
 def _align(model: PointCloud, scene: PointCloud, params: AlignParams) -> AlignResult: ...
 
 # --- One model onto many scenes (bindings/model_aligner.cpp) -----------------

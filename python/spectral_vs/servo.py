@@ -48,6 +48,7 @@ import numpy as np
 from spectral_vs._core import (
     AlignParams,
     AlignResult,
+    AxisRotationStep,
     Kinematics,
     ModelAligner,
     PointCloud,
@@ -55,6 +56,7 @@ from spectral_vs._core import (
     VelocityCommandParams,
     ViewAlignParams,
     egi_coefficients,
+    rotation_step_about,
     voxel_downsample,
 )
 from spectral_vs._core import align_views as _align_views
@@ -749,9 +751,12 @@ class _PlaneTurn:
         Their bandwidth B (the larger of ``plane_turn_bandwidth`` and ``bandwidth``).
     cos_cone : float
         Cosine of ``ServoParams.plane_cone``.
-    gain : float
-        Rad per unit of normalised gradient where the correlation is not concave along the
-        axis (the registration's ``rotation_gain``).
+    law : AlignParams
+        The rotation law the turn steps by (:func:`spectral_vs.rotation_step_about`): the
+        registration's ``rotation_step`` and ``max_rotation_step`` with a
+        ``rotation_gain`` of 1, so that the turn is one whole step, as the
+        ``"iteration"`` estimate takes it (in ``"pose"`` mode a half Newton step after
+        the converged registration left 0.6 degree about the table's normal).
     params : ServoParams
         The servo's settings (``plane_turn_stride``, ``max_rotation_step``).
     """
@@ -761,12 +766,12 @@ class _PlaneTurn:
     coefficients: np.ndarray
     bandwidth: int
     cos_cone: float
-    gain: float
+    law: AlignParams
     params: ServoParams
 
     @staticmethod
     def of(
-        reference: PointCloud, centroid: np.ndarray, params: ServoParams, gain: float
+        reference: PointCloud, centroid: np.ndarray, params: ServoParams, law: AlignParams
     ) -> _PlaneTurn | None:
         """The turn's reference side from the reference's normals (the cloud as captured,
         cropped), or None when the reference has no dominant plane."""
@@ -779,7 +784,9 @@ class _PlaneTurn:
             return None
         bandwidth = max(params.plane_turn_bandwidth, params.bandwidth)
         coefficients = np.asarray(egi_coefficients(off, bandwidth))
-        return _PlaneTurn(axis, centroid, coefficients, bandwidth, cos_cone, gain, params)
+        law = copy.copy(law)
+        law.rotation_gain = 1.0
+        return _PlaneTurn(axis, centroid, coefficients, bandwidth, cos_cone, law, params)
 
     def turn(self, normals: np.ndarray, T_scene_model: np.ndarray) -> float:
         """The turn about ``axis`` (rad, right-multiplied: ``R exp(turn axis)``) that ascends
@@ -806,23 +813,21 @@ class _PlaneTurn:
             return 0.0  # the tilt is still off: the turn would be measured about a wrong axis
         fine = egi_coefficients(off, self.bandwidth)
         coarse_count = self.params.bandwidth**2  # degrees < B come first
-        step = self.params.max_rotation_step
-        g, h = self._slope(fine[:coarse_count], self.coefficients[:coarse_count], R)
-        if not (h < 0 and abs(g / h) < step):
-            return float(np.clip(self.gain * g if h >= 0 else -g / h, -step, step))
+        coarse = self._step(fine[:coarse_count], self.coefficients[:coarse_count], R)
+        if not coarse.newton or coarse.capped:
+            return coarse.turn
         if self.bandwidth > self.params.bandwidth:
-            g_fine, h_fine = self._slope(fine, self.coefficients, R)
-            if h_fine < 0 and abs(g_fine / h_fine) < step:
-                return -g_fine / h_fine
-        return -g / h
+            sharp = self._step(fine, self.coefficients, R)
+            if sharp.newton and not sharp.capped:
+                return sharp.turn
+        return coarse.turn
 
-    def _slope(
+    def _step(
         self, scene_coefficients: np.ndarray, model_coefficients: np.ndarray, R: np.ndarray
-    ) -> tuple[float, float]:
-        """First and second derivatives of the correlation along ``axis`` at ``R``."""
+    ) -> AxisRotationStep:
+        """The registration's rotation law along ``axis`` at ``R`` (in the core)."""
         correlation = So3Correlation(scene_coefficients, model_coefficients)
-        _, gradient, hessian = correlation.evaluate(R, True)
-        return float(gradient @ self.axis), float(self.axis @ hessian @ self.axis)
+        return rotation_step_about(correlation, R, self.axis, self.law)
 
     def turned(self, T_scene_model: np.ndarray, turn: float) -> np.ndarray:
         """``T_scene_model`` with its rotation turned by ``turn`` about ``axis`` around the
@@ -881,7 +886,7 @@ class SpectralServo:
                 cloud if cloud.has_normals else self.reference,
                 self._centroid,
                 self.params,
-                self._align_params.rotation_gain,
+                self._align_params,
             )
             if self.params.plane_turn
             else None
@@ -913,9 +918,7 @@ class SpectralServo:
         points = np.asarray(cloud.points)
         if points[:, 2].max() <= self.params.max_depth:  # the usual case, without a mask
             return cloud
-        keep = points[:, 2] <= self.params.max_depth
-        normals = cloud.normals
-        return PointCloud(points[keep], None if normals is None else np.asarray(normals)[keep])
+        return cloud.select(points[:, 2] <= self.params.max_depth)  # copied in the core
 
     def _prepare(self, cloud: PointCloud, argument: str) -> PointCloud:
         """The cloud downsampled to ``downsample_size``, with normals."""

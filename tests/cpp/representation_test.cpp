@@ -7,7 +7,11 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <map>
+#include <random>
+#include <vector>
 #include <filesystem>
 #include <fstream>
 
@@ -146,6 +150,46 @@ TEST(Preprocessing, VoxelDownsampleAveragesPointsAndNormals) {
       EXPECT_NEAR(reduced.normals()(i, 0), std::sqrt(0.5), 1e-6);
     } else {
       EXPECT_NEAR(reduced.points()(i, 0), 0.0515, 1e-6);
+    }
+  }
+}
+
+// Brute force: every voxel's points gathered in a std::map by voxel index (z, y, x), in
+// row order, then averaged; the hash of voxel_downsample must give the same rows.
+TEST(Preprocessing, VoxelDownsampleMatchesBruteForceOnSeededClouds) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> coordinate(-0.4, 0.6), direction(-1.0, 1.0);
+  for (const double voxel : {0.004, 0.015, 0.05}) {
+    const Eigen::Index n = 20000;
+    Points p(n, 3), nr(n, 3);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      // Clustered like a capture: runs of nearby points, some far apart.
+      const double base = coordinate(rng);
+      p.row(i) << base, 0.3 * coordinate(rng), 0.5 + 0.01 * coordinate(rng);
+      nr.row(i) << direction(rng), direction(rng), 1.0;
+    }
+    const PointCloud cloud(p, nr);
+    const PointCloud reduced = voxel_downsample(cloud, voxel);
+    const Eigen::Vector3d low = cloud.points().colwise().minCoeff();
+    std::map<std::array<long, 3>, std::vector<Eigen::Index>> voxels;  // key (z, y, x)
+    for (Eigen::Index i = 0; i < n; ++i) {
+      std::array<long, 3> key;
+      for (int axis = 0; axis < 3; ++axis)
+        key[2 - axis] = long(std::floor(cloud.points()(i, axis) / voxel));
+      voxels[key].push_back(i);
+    }
+    ASSERT_EQ(reduced.size(), voxels.size()) << voxel;
+    Eigen::Index row = 0;
+    for (const auto& [key, rows] : voxels) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero(), normal = Eigen::Vector3d::Zero();
+      for (const Eigen::Index i : rows) {
+        sum += cloud.points().row(i).transpose() - low;
+        normal += cloud.normals().row(i).transpose();
+      }
+      const Eigen::Vector3d centroid = low + sum / double(rows.size());
+      EXPECT_LT((reduced.points().row(row).transpose() - centroid).norm(), 1e-12) << voxel;
+      EXPECT_LT((reduced.normals().row(row).transpose() - normal.normalized()).norm(), 1e-12);
+      ++row;
     }
   }
 }

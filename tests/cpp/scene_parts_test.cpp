@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 #include <set>
 #include <vector>
@@ -279,6 +280,56 @@ TEST(Icp, AFlatModelKilometresWideNeedsNoHugeGrid) {
   const IcpOutcome outcome = refine_point_to_plane(sheet, sheet, nudged, IcpSettings{});
   EXPECT_GT(outcome.iterations, 0);
   EXPECT_NEAR(outcome.T_scene_model(2, 3), 0.0, 1e-6);  // back onto the plane
+}
+
+}  // namespace
+}  // namespace spectral_vs::detail
+
+namespace spectral_vs::detail {
+namespace {
+
+// Brute force: a point is in reach when every coordinate is within max_translation of
+// the model's box; the bounded grid then holds the model's box with that room on both
+// sides at most (plus a voxel of margin and the FFT-friendly rounding), however far the
+// rest of the scene reaches.
+TEST(BoundedGrid, KeepsTheSceneInReachOfTheModel) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(-2.0, 2.0);
+  Points scene(5000, 3);
+  for (Eigen::Index i = 0; i < scene.rows(); ++i) {
+    scene.row(i) << uniform(rng), uniform(rng), uniform(rng);
+  }
+  const Eigen::AlignedBox3d model(Eigen::Vector3d(-0.4, -0.3, 0.45),
+                                  Eigen::Vector3d(0.4, 0.3, 0.55));
+  const double reach = 0.3, voxel = 0.015;
+  const Points kept = points_in_reach(scene, model, reach);
+  Eigen::Index expected = 0;
+  for (Eigen::Index i = 0; i < scene.rows(); ++i) {
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) {
+      inside = inside && scene(i, a) >= model.min()[a] - reach &&
+               scene(i, a) <= model.max()[a] + reach;
+    }
+    if (!inside) continue;
+    ASSERT_LT(expected, kept.rows());
+    EXPECT_EQ(kept.row(expected), scene.row(i));  // in the scene's order
+    ++expected;
+  }
+  EXPECT_EQ(kept.rows(), expected);
+  const GridSpec bounded =
+      bounded_translation_spec(points_box(kept), model, reach, voxel, GridLimits{});
+  const GridSpec unbounded =
+      bounded_translation_spec(points_box(scene), model, reach, voxel, GridLimits{});
+  for (int a = 0; a < 3; ++a) {
+    const int needed = int(std::ceil((model.sizes()[a] + 2 * reach) / voxel)) + 3;
+    EXPECT_LE(bounded.dims[a], fft_friendly_size(needed)) << a;
+    EXPECT_LE(bounded.origin[a], model.min()[a] - reach) << a;  // holds every shifted model
+    EXPECT_GE(bounded.origin[a] + bounded.dims[a] * voxel, model.max()[a] + reach) << a;
+    EXPECT_GT(unbounded.dims[a], bounded.dims[a]) << a;
+  }
+  // None in reach: the whole scene (the search then fails as before, not on an empty grid).
+  const Eigen::AlignedBox3d far(Eigen::Vector3d::Constant(10.0), Eigen::Vector3d::Constant(11.0));
+  EXPECT_EQ(points_in_reach(scene, far, reach).rows(), scene.rows());
 }
 
 }  // namespace

@@ -226,3 +226,20 @@ def test_egi_errors(rng):
         svs.egi(np.array([[0.0, 0, 1]]), 0)
     with pytest.raises(ValueError, match="cloud has no normals"):
         svs.egi(svs.PointCloud(np.zeros((3, 3))), 8)
+
+
+def test_select_keeps_the_masked_rows_in_order():
+    """PointCloud.select against numpy masking (points to 0 mm, normals exactly)."""
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-1.0, 2.0, (5000, 3))
+    normals = rng.normal(size=(5000, 3))
+    cloud = svs.PointCloud(points, normals)
+    keep = points[:, 2] <= 1.5
+    selected = cloud.select(keep)
+    assert len(selected) == int(keep.sum())
+    np.testing.assert_array_equal(selected.points, points[keep])
+    np.testing.assert_array_equal(selected.normals, np.asarray(cloud.normals)[keep])
+    assert svs.PointCloud(points).select(keep).normals is None
+    assert len(cloud.select(np.zeros(5000, dtype=bool))) == 0
+    with pytest.raises(ValueError, match="one entry per point"):
+        cloud.select(keep[:-1])

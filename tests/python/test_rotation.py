@@ -369,3 +369,56 @@ def test_bad_sizes_and_bandwidths_raise():
         svs.so3_search(np.eye(16)[0], np.ones(16), 4)
     with pytest.raises(ValueError, match="sigma must be finite and >= 0"):
         svs.smooth_coefficients(np.ones(16), 4, -0.1)
+
+
+# --- The rotation law about one axis (the servo's plane turn) ------------------------
+
+
+def test_rotation_step_about_an_axis_is_the_law_along_it(rng):
+    """Brute force: the slope and curvature of C(R exp(theta hat(axis))) by central
+    differences, then the law (Newton where concave, else the gradient law, capped)."""
+    normals = clustered_normals(rng)
+    model = svs.egi_coefficients(normals, 8)
+    params = svs.AlignParams()
+    params.max_rotation_step = 0.05
+    params.rotation_gain = 1.0
+    axis = random_axis(rng)
+    cases = 0
+    for degrees in (0.5, 1.5, 2.5, 20.0, 60.0, 120.0):
+        truth = axis_angle(axis, degrees)  # the scene: the model turned about the axis
+        scene = svs.egi_coefficients(normals @ truth.T, 8)
+        correlation = svs.So3Correlation(scene, model)
+        R = np.eye(3)
+        step = svs.rotation_step_about(correlation, R, 3.0 * axis, params)  # any length
+
+        def C(theta, scene=scene, R=R):
+            turned = R @ axis_angle(axis, np.degrees(theta))
+            return svs.so3_correlation(scene, model, turned)[0]
+
+        h = 1e-4
+        slope = (C(h) - C(-h)) / (2 * h)
+        curvature = (C(h) - 2 * C(0.0) + C(-h)) / h**2
+        assert step.slope == pytest.approx(slope, rel=1e-6, abs=1e-9)
+        assert step.curvature == pytest.approx(curvature, rel=1e-4, abs=1e-6)
+        raw = -slope / curvature if curvature < 0 else slope
+        expected = float(np.clip(raw, -0.05, 0.05))
+        assert step.newton == (curvature < 0)
+        assert step.capped == (abs(raw) > 0.05)
+        assert step.turn == pytest.approx(expected, abs=1e-6)
+        if degrees < 3.0:  # near the peak: the Newton step lands on the truth (within 0.05 deg)
+            assert step.newton and not step.capped
+            assert np.degrees(abs(step.turn - np.radians(degrees))) < 0.05
+            cases += 1
+        else:  # farther: a capped step toward the truth
+            assert step.turn == pytest.approx(0.05 if degrees < 180 else -0.05)
+    assert cases == 3
+    # The gain scales the Newton step too (the law of align()): 1 degree short of the truth.
+    near = axis_angle(axis, 119.0)
+    full = svs.rotation_step_about(correlation, near, axis, params)
+    params.rotation_gain = 0.5
+    half = svs.rotation_step_about(correlation, near, axis, params)
+    assert full.newton and not full.capped
+    assert np.degrees(abs(full.turn - np.radians(1.0))) < 0.05
+    assert half.turn == pytest.approx(0.5 * full.turn, rel=1e-12)
+    with pytest.raises(ValueError, match="axis"):
+        svs.rotation_step_about(correlation, np.eye(3), np.zeros(3), params)

@@ -2,7 +2,10 @@
 
 #include <spectral_vs/rotation/so3.hpp>
 
+#include "common/checks.hpp"
+
 #include <Eigen/Dense>
+#include <cmath>
 
 namespace spectral_vs::detail {
 
@@ -27,6 +30,11 @@ Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& para
   const double angle = omega.norm();
   if (angle > params.max_rotation_step) omega *= params.max_rotation_step / angle;
   return omega;
+}
+
+double capped_step(double step, const AlignParams& params, bool* capped) {
+  *capped = std::abs(step) > params.max_rotation_step;
+  return *capped ? std::copysign(params.max_rotation_step, step) : step;
 }
 
 AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
@@ -81,3 +89,25 @@ AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, Transla
 }
 
 }  // namespace spectral_vs::detail
+
+namespace spectral_vs {
+
+AxisRotationStep rotation_step_about(So3Correlation& correlation, const Eigen::Matrix3d& R,
+                                     const Eigen::Vector3d& axis, const AlignParams& params) {
+  const double length = axis.norm();
+  if (!(length > 0.0) || !std::isfinite(length))
+    detail::fail("axis must be a finite, non-zero direction, got ", axis.transpose());
+  const Eigen::Vector3d a = axis / length;
+  const bool newton_law = params.rotation_step == RotationStep::newton;
+  const CorrelationValue c = correlation.evaluate(R, newton_law);
+  AxisRotationStep out;
+  out.slope = a.dot(c.gradient);
+  out.curvature = newton_law ? a.dot(c.hessian * a) : 0.0;
+  // The law of detail::rotation_step, in one dimension.
+  out.newton = newton_law && out.curvature < 0.0;
+  const double step = params.rotation_gain * (out.newton ? -out.slope / out.curvature : out.slope);
+  out.turn = detail::capped_step(step, params, &out.capped);
+  return out;
+}
+
+}  // namespace spectral_vs

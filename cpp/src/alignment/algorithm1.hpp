@@ -56,6 +56,9 @@ struct Algorithm1Problem {
 /// rotation_gain, capped at max_rotation_step; a rotation vector, radians.
 Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params);
 
+/// `step` (radians) cut to +-max_rotation_step; `capped` tells whether it was.
+double capped_step(double step, const AlignParams& params, bool* capped);
+
 /// Algorithm 1 from `pose` until the stop rule of eq. (17), `max_iterations` or the
 /// deadline; `pose` is left where it ended. Returns that pose, the history, converged, stop_reason,
 /// the final correlation and translation peak, and the window's dims when it ended on one; the

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
+#include <vector>
 
 namespace spectral_vs {
 
@@ -24,6 +25,10 @@ using detail::fail;
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Phase correlations of other grid sizes a ModelAligner keeps besides the current one
+// (about 20 bytes per voxel each: 8 MB for a 0.4 M-voxel grid).
+constexpr std::size_t kKeptPlans = 3;
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
@@ -42,6 +47,10 @@ struct ModelAligner::Impl {
   Eigen::Vector3i max_shift = Eigen::Vector3i::Zero();  // voxels, of max_translation
   // Re-used per scene: the translation grid's transforms and voxels.
   std::optional<PhaseCorrelation> phase;
+  // Grids of other sizes seen lately, most recent first: a camera moving between views
+  // of a few grid sizes re-uses their FFT plans and buffers (new ones for a 0.4 M-voxel
+  // grid took 2-5 ms, as much as the step's two transforms).
+  std::vector<PhaseCorrelation> kept_plans;
   VoxelGrid target, moving;
   detail::FitnessMap fitness_map;
   ModelAlignerTimings timings;
@@ -70,15 +79,35 @@ struct ModelAligner::Impl {
     const Points& at_start = move(start);
     const Eigen::AlignedBox3d model_box(at_start.colwise().minCoeff().transpose(),
                                         at_start.colwise().maxCoeff().transpose());
-    const GridSpec spec = detail::bounded_translation_spec(
-        bounding_box(scene), model_box, params.max_translation, params.voxel_size, params.limits);
-    if (!phase || phase->spec().dims != spec.dims) {
-      phase.reset();  // free the old buffers before allocating the new ones
-      phase.emplace(spec, detail::phase_params(params));
-    }
-    voxelize_into(scene.points(), spec, params.occupancy, target, params.limits);
+    // Only the scene points a bounded shift can reach enter the grid (as in align()).
+    const Points in_reach =
+        detail::points_in_reach(scene.points(), model_box, params.max_translation);
+    const GridSpec spec =
+        detail::bounded_translation_spec(detail::points_box(in_reach), model_box,
+                                         params.max_translation, params.voxel_size, params.limits);
+    use_plans(spec);
+    voxelize_into(in_reach, spec, params.occupancy, target, params.limits);
     phase->set_target(target);
     return spec;
+  }
+
+  // Makes `phase` a phase correlation of spec's size: the most recently used one of that
+  // size when kept, else new plans (the least recently used kept ones freed first).
+  void use_plans(const GridSpec& spec) {
+    const auto same = [&](const PhaseCorrelation& p) { return p.spec().dims == spec.dims; };
+    if (phase && same(*phase)) return;
+    if (phase) kept_plans.insert(kept_plans.begin(), std::move(*phase));
+    phase.reset();
+    const auto found = std::find_if(kept_plans.begin(), kept_plans.end(), same);
+    if (found != kept_plans.end()) {
+      phase.emplace(std::move(*found));
+      kept_plans.erase(found);
+      return;
+    }
+    if (kept_plans.size() > kKeptPlans) {
+      kept_plans.erase(kept_plans.begin() + kKeptPlans, kept_plans.end());
+    }
+    phase.emplace(spec, detail::phase_params(params));
   }
 
   // The bounded grid placed around the model's start, as Algorithm 1's translation source.

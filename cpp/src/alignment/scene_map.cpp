@@ -288,13 +288,47 @@ GridSpec scene_spec(const SceneMap& scene, const Eigen::Vector3d& start, double 
 GridSpec bounded_translation_spec(const Eigen::AlignedBox3d& scene_box,
                                   const Eigen::AlignedBox3d& model_box, double max_translation,
                                   double voxel_size, const GridLimits& limits) {
-  Eigen::AlignedBox3d cover = scene_box;
-  cover.extend(model_box);
   // The grid is circular: max_translation of room once, past the far side, keeps every
   // shift of up to max_translation either way from wrapping one cloud onto the other.
+  Eigen::AlignedBox3d cover = scene_box;
+  cover.extend(model_box);
   cover.max().array() += max_translation;
+  // Or the model's box with the room on both sides, which holds every shifted model
+  // without wrapping at all; valid on an axis where the scene lies within it.
+  Eigen::AlignedBox3d reach = model_box;
+  reach.min().array() -= max_translation;
+  reach.max().array() += max_translation;
+  for (int axis = 0; axis < 3; ++axis) {
+    const bool inside =
+        scene_box.min()[axis] >= reach.min()[axis] && scene_box.max()[axis] <= reach.max()[axis];
+    if (inside && reach.sizes()[axis] < cover.sizes()[axis]) {
+      cover.min()[axis] = reach.min()[axis];
+      cover.max()[axis] = reach.max()[axis];
+    }
+  }
   const int shifts = 2 * voxels_along(max_translation, voxel_size, limits) + 2;
   return covering_spec(cover, Eigen::Vector3i::Constant(shifts), voxel_size, limits);
+}
+
+Eigen::AlignedBox3d points_box(const Points& points) {
+  return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(),
+                             points.colwise().maxCoeff().transpose());
+}
+
+Points points_in_reach(const Points& scene, const Eigen::AlignedBox3d& model_box,
+                       double max_translation) {
+  const Eigen::Array3d low = model_box.min().array() - max_translation;
+  const Eigen::Array3d high = model_box.max().array() + max_translation;
+  std::vector<Eigen::Index> rows;
+  rows.reserve(std::size_t(scene.rows()));
+  for (Eigen::Index i = 0; i < scene.rows(); ++i) {
+    const Eigen::Array3d p = scene.row(i).transpose().array();
+    if ((p >= low).all() && (p <= high).all()) rows.push_back(i);
+  }
+  if (rows.empty() || Eigen::Index(rows.size()) == scene.rows()) return scene;
+  Points out(Eigen::Index(rows.size()), 3);
+  for (std::size_t k = 0; k < rows.size(); ++k) out.row(Eigen::Index(k)) = scene.row(rows[k]);
+  return out;
 }
 
 SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d& start,
@@ -306,11 +340,22 @@ SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::Vector3d&
 SceneTranslation::SceneTranslation(const SceneMap& scene, const Eigen::AlignedBox3d& model_box,
                                    double max_translation, double voxel_size, Occupancy occupancy,
                                    const PhaseCorrelationParams& params, const GridLimits& limits)
-    : SceneTranslation(scene,
-                       bounded_translation_spec(bounding_box(scene.cloud()), model_box,
-                                                max_translation, voxel_size, limits),
-                       Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits)),
-                       occupancy, params, limits) {}
+    : SceneTranslation(points_in_reach(scene.cloud().points(), model_box, max_translation),
+                       model_box, max_translation, voxel_size, occupancy, params, limits) {}
+
+SceneTranslation::SceneTranslation(const Points& in_reach, const Eigen::AlignedBox3d& model_box,
+                                   double max_translation, double voxel_size, Occupancy occupancy,
+                                   const PhaseCorrelationParams& params, const GridLimits& limits)
+    : occupancy_(occupancy),
+      limits_(limits),
+      spec_(bounded_translation_spec(points_box(in_reach), model_box, max_translation, voxel_size,
+                                     limits)),
+      phase_(spec_, params),
+      max_shift_(Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits))) {
+  voxelize_into(in_reach, spec_, occupancy, target_, limits);
+  target_energy_ = grid_energy(target_);
+  phase_.set_target(target_);
+}
 
 SceneTranslation::SceneTranslation(const SceneMap& scene, const GridSpec& spec,
                                    const std::optional<Eigen::Vector3i>& max_shift,

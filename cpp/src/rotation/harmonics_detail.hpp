@@ -8,6 +8,15 @@ namespace spectral_vs::detail {
 /// S^l_m(x, y, z) for l <= lmax into out[0 .. (lmax+1)^2), for a unit vector.
 void real_sh_unit(double x, double y, double z, int lmax, double* out);
 
+/// Adds sum_j w[j] S^l_m(x[j], y[j], z[j]) for l <= lmax to out[0 .. (lmax+1)^2), for
+/// count <= kHarmonicsBlock unit vectors: real_sh_unit for a block of vectors at once,
+/// whose inner loops run across the vectors (vectorised), with no per-vector output.
+void accumulate_real_sh(const double* x, const double* y, const double* z, const double* w,
+                        int count, int lmax, double* out);
+
+/// Vectors per call of accumulate_real_sh.
+inline constexpr int kHarmonicsBlock = 32;
+
 /// A transform per bandwidth, built once and shared (construction is mutex-guarded).
 const SphericalHarmonicTransform& cached_transform(int bandwidth);
 

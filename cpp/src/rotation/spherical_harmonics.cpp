@@ -85,6 +85,65 @@ void real_sh_unit(double x, double y, double z, int lmax, double* out) {
   }
 }
 
+void accumulate_real_sh(const double* x, const double* y, const double* z, const double* w,
+                        int count, int lmax, double* out) {
+  constexpr int K = kHarmonicsBlock;
+  const LegendreFactors& f = legendre_factors();
+  constexpr int n = LegendreFactors::kSize;
+  // Padded to a whole block with zero weights, so every loop below has K iterations.
+  double zz[K], re[K], im[K], xs[K], ys[K], c[K], s[K], q_prev[K], q[K], q_next[K];
+  for (int j = 0; j < K; ++j) {
+    const bool used = j < count;
+    xs[j] = used ? x[j] : 0.0;
+    ys[j] = used ? y[j] : 0.0;
+    zz[j] = used ? z[j] : 0.0;
+    re[j] = used ? w[j] : 0.0;  // the weight rides on the azimuthal factor
+    im[j] = 0.0;
+  }
+  for (int m = 0; m <= lmax; ++m) {
+    const double scale = m == 0 ? 1.0 : M_SQRT2;
+    double sum_c = 0.0, sum_s = 0.0;
+    for (int j = 0; j < K; ++j) {
+      c[j] = scale * re[j];
+      s[j] = scale * im[j];
+      sum_c += c[j];
+      sum_s += s[j];
+    }
+    // Q^m_m is a constant; Q^{m+1}_m = sqrt(2m + 3) z Q^m_m.
+    out[sh_index(m, m)] += f.diagonal[m] * sum_c;
+    if (m > 0) out[sh_index(m, -m)] += f.diagonal[m] * sum_s;
+    if (m < lmax) {
+      const double first = std::sqrt(2.0 * m + 3.0) * f.diagonal[m];
+      for (int j = 0; j < K; ++j) {
+        q_prev[j] = f.diagonal[m];
+        q[j] = first * zz[j];
+      }
+      for (int l = m + 1; l <= lmax; ++l) {
+        if (l > m + 1) {
+          const double a = f.a[l * n + m], b = f.b[l * n + m];
+          for (int j = 0; j < K; ++j) {
+            q_next[j] = a * (zz[j] * q[j] - b * q_prev[j]);
+            q_prev[j] = q[j];
+            q[j] = q_next[j];
+          }
+        }
+        double dot_c = 0.0, dot_s = 0.0;
+        for (int j = 0; j < K; ++j) {
+          dot_c += c[j] * q[j];
+          dot_s += s[j] * q[j];
+        }
+        out[sh_index(l, m)] += dot_c;
+        if (m > 0) out[sh_index(l, -m)] += dot_s;
+      }
+    }
+    for (int j = 0; j < K; ++j) {  // (x + i y)^(m + 1) = sin^(m+1)(theta) e^{i (m+1) phi}
+      const double next_re = re[j] * xs[j] - im[j] * ys[j];
+      im[j] = re[j] * ys[j] + im[j] * xs[j];
+      re[j] = next_re;
+    }
+  }
+}
+
 const SphericalHarmonicTransform& cached_transform(int bandwidth) {
   require_bandwidth(bandwidth);
   static std::mutex mutex;

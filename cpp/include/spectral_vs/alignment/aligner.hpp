@@ -7,6 +7,7 @@
 #include <spectral_vs/representation/point_cloud.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
 #include <spectral_vs/rotation/egi_coefficients.hpp>
+#include <spectral_vs/rotation/so3_correlation.hpp>
 
 #include <cstddef>
 #include <optional>
@@ -170,5 +171,24 @@ struct AlignResult {
 ///         or running out of max_seconds, is not an error: it returns converged = false
 ///         and the stop_reason.
 AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignParams& params = {});
+
+/// One rotation step of Algorithm 1 restricted to turns about an axis.
+struct AxisRotationStep {
+  double turn = 0.0;       ///< The step, radians about the axis (R <- R exp(turn hat(axis))).
+  double slope = 0.0;      ///< dC/dtheta along the axis at R, per radian.
+  double curvature = 0.0;  ///< d2C/dtheta2 along the axis at R, per radian^2.
+  bool newton = false;     ///< The Newton step (the correlation is concave along the axis).
+  bool capped = false;     ///< The step was cut to params.max_rotation_step.
+};
+
+/// The rotation law of Algorithm 1 (params.rotation_step, rotation_gain and
+/// max_rotation_step, as align() steps) for rotations R exp(theta hat(axis)) only: the
+/// Newton step -gain slope / curvature where the curvature is negative, else the
+/// gradient law gain slope, capped at max_rotation_step. For a turn about one direction
+/// (a table's normal) that the full 3D step leaves to the other two.
+/// @param axis direction of the turn, in the frame R acts on (model frame); normalised here.
+/// @throws std::invalid_argument for a zero or non-finite axis or an R that is no rotation.
+AxisRotationStep rotation_step_about(So3Correlation& correlation, const Eigen::Matrix3d& R,
+                                     const Eigen::Vector3d& axis, const AlignParams& params);
 
 }  // namespace spectral_vs

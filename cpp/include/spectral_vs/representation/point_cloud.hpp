@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <string>
+#include <vector>
 
 namespace spectral_vs {
 
@@ -41,6 +42,10 @@ class PointCloud {
   /// The cloud moved by `T_target_source` (points rotated and translated, normals rotated).
   /// @throws std::invalid_argument if the transform has non-finite entries.
   PointCloud transformed(const Transform& T_target_source) const;
+
+  /// The rows i with keep[i] != 0, in order, with their normals (no re-check: the rows
+  /// are this cloud's). @throws std::invalid_argument unless keep has one entry per point.
+  PointCloud selected(const std::vector<char>& keep) const;
 
  private:
   Points points_;

@@ -12,7 +12,8 @@ namespace spectral_vs {
 /// y, then x index (deterministic). Normals, when present, are averaged and renormalised;
 /// a voxel whose normals cancel out is dropped.
 /// Double precision throughout, with sums relative to the cloud's box: precision does not
-/// depend on the distance from the origin. Linear in the number of points (a radix sort).
+/// depend on the distance from the origin. Linear in the number of points (a hash of the
+/// occupied voxels).
 /// @param voxel_size edge of the cube in metres, finite, > 0 and <= 1e6.
 /// @throws std::invalid_argument for an empty cloud or a voxel size that is not
 ///         finite, not positive, over 1e6 m, or so small that voxel indices would overflow.
