@@ -67,6 +67,7 @@ FAMILIES = {
     "table-320": ("table", 2),
     "room-320": ("room", 2),
     "sim-320": ("sim", 1),
+    "sim-panda-320": ("sim-panda", 1),
 }
 SUCCESS_DEG = 5.0
 SUCCESS_M = 0.010
@@ -101,12 +102,19 @@ def run_method(method: str, pair: data.ViewPair, arrays: dict, voxel: float, see
         import spectral_vs as svs
 
         start, cpu_start = time.perf_counter(), time.process_time()
-        result = svs.align_views(  # type: ignore[attr-defined]
+        result = svs.align_views(
             pair.reference, pair.current, current_viewpoint=pair.current_viewpoint
         )
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         T = np.asarray(result.T_current_reference)
-        extra = {"converged": bool(result.converged), "fitness": float(result.fitness)}
+        support = result.support
+        extra = {
+            "converged": bool(result.converged),
+            "score": float(support.score),
+            "fitness": float(support.fitness),
+            "overlap": float(support.overlap),
+            "voxel": float(result.scale.voxel_size),
+        }
     else:
         (ref_xyz, ref_normals), (cur_xyz, cur_normals) = arrays["reference"], arrays["current"]
         if method == "kiss_icp":
@@ -132,8 +140,12 @@ def run_method(method: str, pair: data.ViewPair, arrays: dict, voxel: float, see
 
 def family_pairs(family: str, count: int, seed: int, data_folder: Path | None) -> list:
     scan, downscale = FAMILIES[family]
-    if scan == "sim":
-        return data.sim_view_pairs(count, start_set="large", seed=seed)
+    if scan.startswith("sim"):
+        from spectral_vs import sim
+
+        robot = sim.robot_model("panda" if scan == "sim-panda" else "iiwa")
+        params = sim.SimParams(robot=robot)
+        return data.sim_view_pairs(count, start_set="large", seed=seed, params=params)
     return data.view_pairs(data.scan_path(scan, data_folder), count, seed=seed, downscale=downscale)
 
 

@@ -25,7 +25,7 @@ search_voxel_size : float
     Voxel of the hypotheses' placement grid, m; 0: twice the voxel.
 voxels_across : float
     With voxel_size 0: voxels across the larger view's typical size (twice the median
-    distance of its points from their median), >= 4 (default 24).
+    distance of its points from their median), >= 4 (default 32).
 downsample : bool
     Downsample both views to half a voxel first (default True).
 bandwidth : int
@@ -98,7 +98,7 @@ void define_view_aligner(py::module_& m) {
       [](const PointCloud& reference, const PointCloud& current, double voxels_across) {
         return view_scale(reference, current, voxels_across);
       },
-      py::arg("reference"), py::arg("current"), py::arg("voxels_across") = 24.0,
+      py::arg("reference"), py::arg("current"), py::arg("voxels_across") = 32.0,
       "The scale align_views derives from two views: voxel max(extent / voxels_across, "
       "3 extent / sqrt(N)) with extent twice the median distance of the larger view's points "
       "from their median, search voxel twice that.");
@@ -192,8 +192,11 @@ Attributes
 T_current_reference : ndarray (4, 4)
     Maps reference points into the current view's coordinates.
 converged : bool
-    The search ran to its end within max_seconds; whether the pose is right is what
-    ``support.score`` says.
+    status == 'converged'; whether the pose is right is what ``support.score`` says.
+status : str
+    'converged'; 'no_support' (no pose the search tried is supported anywhere in the
+    current view: the views do not overlap, or too little for the search); or
+    'max_seconds' (the budget ran out: the best pose found in time).
 support : ViewSupport
     Of the returned pose.
 correlation : float
@@ -211,6 +214,17 @@ hypotheses : list of (ndarray (4, 4), ViewSupport)
           "T_current_reference",
           [](const ViewAlignResult& r) { return Transform(r.T_current_reference); })
       .def_readonly("converged", &ViewAlignResult::converged)
+      .def_property_readonly("status",
+                             [](const ViewAlignResult& r) {
+                               switch (r.status) {
+                                 case ViewAlignStatus::converged:
+                                   return "converged";
+                                 case ViewAlignStatus::no_support:
+                                   return "no_support";
+                                 default:
+                                   return "max_seconds";
+                               }
+                             })
       .def_readonly("support", &ViewAlignResult::support)
       .def_readonly("correlation", &ViewAlignResult::correlation)
       .def_readonly("scale", &ViewAlignResult::scale)

@@ -450,7 +450,7 @@ class ViewScale:
     def extent(self) -> float: ...
 
 def view_scale(
-    reference: PointCloud, current: PointCloud, voxels_across: float = 24.0
+    reference: PointCloud, current: PointCloud, voxels_across: float = 32.0
 ) -> ViewScale: ...
 
 class ViewAlignParams:
@@ -502,6 +502,8 @@ class ViewAlignResult:
     def T_current_reference(self) -> _Array: ...  # (4, 4)
     @property
     def converged(self) -> bool: ...
+    @property
+    def status(self) -> str: ...  # "converged", "no_support" or "max_seconds"
     @property
     def support(self) -> ViewSupport: ...
     @property

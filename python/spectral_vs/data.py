@@ -412,6 +412,7 @@ def sim_view_pairs(
     start_set: str = "large",
     seed: int = 0,
     params: SimParams | None = None,
+    min_view_share: float = 0.3,
 ) -> list[ViewPair]:
     """``count`` rendered pairs of the simulated table: the wrist camera's view at the
     home pose (reference) and at the seeded start poses of
@@ -429,6 +430,9 @@ def sim_view_pairs(
         A key of ``spectral_vs.servo.START_SETS`` (``"moderate"`` or ``"large"``).
     seed : int
         Seed of the start poses.
+    min_view_share : float
+        Least share of the reference's points in the current camera's field of view
+        (``PyBulletRobot.view_check``, occlusion ignored), in (0, 1].
     params : spectral_vs.sim.SimParams, optional
         The simulation (kinematic, 320 x 240, the iiwa at ``sim.HOME_Q`` by default); the
         reference is rendered at its start configuration ``params.q_start``.
@@ -452,7 +456,10 @@ def sim_view_pairs(
     pairs = []
     with sim.PyBulletRobot(params) as robot:
         q_home = robot.joint_positions() if params.q_start is None else params.q_start
-        starts = start_poses(robot.kinematics, start_set, count, seed, q_home)
+        # As the extreme set: only starts that keep 30% of the reference's points in view
+        # (two views that share less are not the same scene seen twice).
+        accept = robot.view_check(min_share=min_view_share, q_reference=q_home)
+        starts = start_poses(robot.kinematics, start_set, count, seed, q_home, accept)
         robot.reset_joint_positions(q_home)
         reference, T_world_reference = robot.capture(), robot.camera_pose()
         for q, _, _ in starts:

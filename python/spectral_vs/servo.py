@@ -868,10 +868,9 @@ class SpectralServo:
             )
         self._align_params = self.params.align_params()
         self._view_params = ViewAlignParams(**self.params.view_overrides)
-        self._reference_view = cloud if cloud.has_normals else None
         self.reference = self._prepare(cloud, "reference")
-        if self._reference_view is None:
-            self._reference_view = self.reference
+        # What the relocalization registers: the reference as captured, with its normals.
+        self._reference_view = cloud if cloud.has_normals else self.reference
         # The reference's side of the registration (its EGI coefficients, centred points)
         # is prepared once here; each step adds only the current cloud's work.
         self._aligner = ModelAligner(self.reference, self._align_params)
@@ -1174,13 +1173,7 @@ class SpectralServo:
     def _relocalize(self, cloud: PointCloud, record: ServoRecord) -> None:
         """The global registration of the reference onto ``cloud`` (cropped, as captured):
         taken as the previous estimate when its support reaches ``relocalize_score``."""
-        try:
-            result = _align_views(self._reference_view, cloud, self._view_params)
-        except ValueError as error:
-            if "share no surface" not in str(error):
-                raise
-            record.relocalization_score = 0.0  # nothing of the reference in view: go on
-            return
+        result = _align_views(self._reference_view, cloud, self._view_params)
         record.relocalization_score = float(result.support.score)
         if result.support.score < self.params.relocalize_score:
             return

@@ -65,16 +65,17 @@ def align_views(
     -------
     ViewAlignResult
         ``T_current_reference`` (4 x 4), ``support`` (its ``score`` in [0, 1] separates
-        right from wrong poses: docs/views.md), ``converged``, the ``scale`` used and
+        right from wrong poses: docs/views.md), ``converged`` and ``status``
+        (``"converged"``, ``"no_support"`` or ``"max_seconds"``), the ``scale`` used and
         every checked hypothesis.
 
     Raises
     ------
     ValueError
         For an empty view, an array of the wrong shape, non-finite coordinates, a
-        viewpoint that is not 3 finite numbers, an unknown or out-of-range setting, a grid
-        over ``max_voxels``, or views that share nothing (no pose of the reference is
-        supported anywhere by the current view); the message names the argument.
+        viewpoint that is not 3 finite numbers, an unknown or out-of-range setting, or a
+        grid over ``max_voxels``; the message names the argument. Views that share no
+        surface are not an error: the result's ``status`` is ``"no_support"``.
     TypeError
         For ``params`` that is not a :class:`ViewAlignParams`.
     """

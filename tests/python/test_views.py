@@ -71,7 +71,8 @@ def test_the_scale_is_derived_from_the_views_or_given(table_pairs):
     points = np.asarray(pair.current.points)
     typical = 2 * np.median(np.linalg.norm(points - np.median(points, axis=0), axis=1))
     assert scale.extent >= typical * 0.999  # the larger of the two views'
-    assert scale.voxel_size == pytest.approx(max(scale.extent / 24, 3 * scale.extent / 100))
+    n = min(len(pair.reference), len(pair.current))
+    assert scale.voxel_size == pytest.approx(max(scale.extent / 32, 3 * scale.extent / n**0.5))
     given = svs.align_views(
         pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, voxel_size=0.03
     )
@@ -107,3 +108,16 @@ def test_bad_input_names_the_argument(table_pairs):
         svs.align_views(pair.reference, pair.current, voxel_size=0.01, max_voxels=1000)
     with pytest.raises(TypeError, match="ViewAlignParams"):
         svs.align_views(pair.reference, pair.current, params=svs.AlignParams())
+
+
+def test_views_that_share_nothing_say_so(table_pairs):
+    """A plane seen edge-on from behind (every normal facing away from the current
+    sensor): no pose the search tries is supported, and the result says so."""
+    pair = table_pairs[0]
+    rng = np.random.default_rng(1)
+    plane = np.column_stack([rng.uniform(-0.5, 0.5, 3000), rng.uniform(-0.5, 0.5, 3000)])
+    points = np.column_stack([plane, np.full(3000, 1.0)])
+    away = svs.PointCloud(points, np.tile([0.0, 0.0, 1.0], (3000, 1)))
+    result = svs.align_views(pair.reference, away)
+    assert result.status == "no_support" and not result.converged
+    assert result.support.confirmed == 0

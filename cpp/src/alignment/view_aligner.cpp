@@ -486,12 +486,11 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
     if (i == 0 || result.support.score > best.support.score) best = std::move(result);
     in_time = !expired(views);
   }
-  if (best.support.confirmed == 0 && in_time) {
-    fail(
-        "reference, current: the views share no surface: no pose of the reference that the "
-        "search tried is supported anywhere in the current view");
-  }
-  best.converged = in_time && int(ranked.size()) == params.hypotheses;
+  const bool searched = in_time && int(ranked.size()) == params.hypotheses;
+  best.status = !searched                     ? ViewAlignStatus::max_seconds
+                : best.support.confirmed == 0 ? ViewAlignStatus::no_support
+                                              : ViewAlignStatus::converged;
+  best.converged = best.status == ViewAlignStatus::converged;
   best.scale = scale;
   best.correlation =
       correlation.evaluate(Eigen::Matrix3d(best.T_current_reference.topLeftCorner<3, 3>())).value;

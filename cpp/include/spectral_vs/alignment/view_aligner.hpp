@@ -32,14 +32,14 @@ struct ViewScale {
 /// @throws std::invalid_argument for an empty view, views of one point, or
 ///         voxels_across < 4.
 ViewScale view_scale(const PointCloud& reference, const PointCloud& current,
-                     double voxels_across = 24.0);
+                     double voxels_across = 32.0);
 
 /// Settings of `align_views`. Every length defaults to 0: derived from the views by
 /// `view_scale` (docs/views.md gives the rule and what it was measured on).
 struct ViewAlignParams {
   double voxel_size = 0.0;         ///< Voxel of Algorithm 1 and of the fitness, metres; 0: derived.
   double search_voxel_size = 0.0;  ///< Voxel of the hypotheses' placement, metres; 0: 2 voxels.
-  double voxels_across = 24.0;     ///< With voxel_size = 0: voxels across the views' typical size.
+  double voxels_across = 32.0;     ///< With voxel_size = 0: voxels across the views' typical size.
   bool downsample = true;          ///< Downsample both views to half a voxel first (PCL VoxelGrid).
   int bandwidth = 16;              ///< B of the EGIs and of the SO(3) search.
   int hypotheses = 16;             ///< Rotations of the SO(3) search placed and checked, >= 1.
@@ -80,14 +80,24 @@ struct ViewSupport {
   double score = 0.0;
 };
 
+/// How `align_views` ended.
+enum class ViewAlignStatus {
+  converged,    ///< The search ran to its end and the kept pose has support.
+  no_support,   ///< No pose the search tried is supported anywhere in the current view:
+                ///< the views do not overlap, or too little for the search to find it.
+  max_seconds,  ///< ViewAlignParams::max_seconds ran out: the best pose found in time.
+};
+
 /// Outcome of `align_views`.
 struct ViewAlignResult {
   Transform T_current_reference = Transform::Identity();  ///< Maps reference points into the
                                                           ///< current view's coordinates.
-  /// The search ran to its end (every hypothesis and refinement within max_seconds).
-  /// Whether the answer is right is `support.score`'s to say (docs/views.md measures it).
+  /// status == converged: the search ran to its end (every hypothesis and refinement
+  /// within max_seconds) and the kept pose has support. Whether it is right is
+  /// `support.score`'s to say (docs/views.md measures it).
   bool converged = false;
-  ViewSupport support;       ///< Of the returned pose.
+  ViewAlignStatus status = ViewAlignStatus::no_support;  ///< Why it ended.
+  ViewSupport support;                                   ///< Of the returned pose.
   double correlation = 0.0;  ///< Normalised EGI correlation at the returned rotation.
   ViewScale scale;           ///< The scale it worked at.
   int hypothesis = 0;        ///< Index of the kept hypothesis (best correlated first).
@@ -108,9 +118,10 @@ ViewSupport view_support(const PointCloud& reference, const PointCloud& current,
 /// onto the same surfaces in the current view. Global over rotation (the SO(3) search of
 /// the views' EGIs) and translation (phase correlation over both views), each of the
 /// best-supported hypotheses refined by Algorithm 1 on the views and a point-to-plane ICP.
+/// Views that share no surface are not an error: status says no_support.
 /// @throws std::invalid_argument for an empty view, missing normals, non-finite or
-///         out-of-range settings, a grid over params.limits, or views that nowhere face
-///         the current viewpoint.
+///         out-of-range settings, a grid over params.limits, or a current view with no
+///         point in front of current_viewpoint.
 ViewAlignResult align_views(const PointCloud& reference, const PointCloud& current,
                             const ViewAlignParams& params = {});
 
