@@ -37,7 +37,7 @@ def run(large_start, params: ServoParams, max_steps: int):
 
 
 def test_the_first_step_starts_from_the_global_registration(large_start):
-    robot, reference, T_world_reference, q = large_start
+    robot, _, T_world_reference, q = large_start
     start_mm, start_deg = errors_mm_deg(np.asarray(robot.kinematics.forward(q)), T_world_reference)
     assert start_mm > 200 and start_deg > 40
     log, _ = run(large_start, ServoParams(), max_steps=1)
