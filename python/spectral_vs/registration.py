@@ -53,6 +53,30 @@ def as_cloud(cloud: CloudLike, argument: str) -> PointCloud:
     return PointCloud(array)
 
 
+def with_overrides(params: Any, kind: type, overrides: dict[str, Any], what: str) -> Any:
+    """A copy of ``params`` (a ``kind``, or ``kind()`` for None) with the fields of
+    ``overrides`` set: the caller's settings never change.
+
+    Raises
+    ------
+    TypeError
+        For ``params`` of another type, or a value of the wrong type.
+    ValueError
+        For a field that ``kind`` does not have (named as ``what``).
+    """
+    if params is not None and not isinstance(params, kind):
+        raise TypeError(f"params must be of type {kind.__name__}, got {type(params).__name__}")
+    settings = copy.copy(params) if params is not None else kind()
+    for name, value in overrides.items():
+        if not hasattr(settings, name) or name.startswith("_"):
+            raise ValueError(f"unknown {what} {name!r}")
+        try:
+            setattr(settings, name, value)
+        except TypeError as error:
+            raise TypeError(f"{what} {name!r}: {error}") from error
+    return settings
+
+
 def check_voxel_size(voxel_size: Any) -> None:
     """Raise ``ValueError`` unless ``voxel_size`` is a finite number > 0 (metres)."""
     if isinstance(voxel_size, bool) or not isinstance(voxel_size, numbers.Real):
@@ -171,17 +195,7 @@ def align(
     case. ``max_seconds`` counts from the start of the C++ alignment, after downsampling
     and normal estimation.
     """
-    if params is not None and not isinstance(params, AlignParams):
-        raise TypeError(f"params must be an AlignParams, got {type(params).__name__}")
-    # A copy: overrides never change the caller's settings.
-    settings = copy.copy(params) if params is not None else AlignParams()
-    for name, value in overrides.items():
-        if not hasattr(settings, name) or name.startswith("_"):
-            raise ValueError(f"unknown alignment setting {name!r}")
-        try:
-            setattr(settings, name, value)
-        except TypeError as error:
-            raise TypeError(f"alignment setting {name!r}: {error}") from error
+    settings = with_overrides(params, AlignParams, overrides, "alignment setting")
     viewpoint = check_viewpoint(viewpoint)
     model_cloud = prepare(
         as_cloud(model, "model"), "model", settings.voxel_size, downsample, viewpoint

@@ -8,7 +8,6 @@ surfaces in the current view's coordinates. Every length is derived from the vie
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 from spectral_vs._core import (
@@ -18,7 +17,7 @@ from spectral_vs._core import (
     estimate_normals,
 )
 from spectral_vs._core import align_views as _align_views
-from spectral_vs.registration import CloudLike, as_cloud, check_viewpoint
+from spectral_vs.registration import CloudLike, as_cloud, check_viewpoint, with_overrides
 
 #: Neighbours of an estimated normal's plane fit: a count, not a radius, because a depth
 #: camera's point spacing grows with the square of the depth (2 mm at 1 m, 50 mm at 10 m).
@@ -79,13 +78,7 @@ def align_views(
     TypeError
         For ``params`` that is not a :class:`ViewAlignParams`.
     """
-    if params is not None and not isinstance(params, ViewAlignParams):
-        raise TypeError(f"params must be a ViewAlignParams, got {type(params).__name__}")
-    settings = copy.copy(params) if params is not None else ViewAlignParams()
-    for name, value in overrides.items():
-        if not hasattr(settings, name) or name.startswith("_"):
-            raise ValueError(f"unknown view alignment setting {name!r}")
-        setattr(settings, name, value)
+    settings = with_overrides(params, ViewAlignParams, overrides, "view alignment setting")
     current_origin = check_viewpoint(current_viewpoint)
     settings.current_viewpoint = current_origin
     reference_view = _view(reference, "reference", check_viewpoint(reference_viewpoint))
