@@ -595,6 +595,8 @@ def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any)
         f" mm {np.degrees(record.rotation_error):5.2f} deg)  fitness "
         f"{record.fitness:4.2f}  |v| {1000 * np.linalg.norm(record.twist[:3]):5.1f} mm/s"
         f"  {1000 * record.seconds:4.0f} ms"
+        + (f"  relocalized (score {record.relocalization_score:.2f})" if record.relocalized else "")
+        + (f"  held: {record.hold}" if record.hold else "")
     )
 
 
