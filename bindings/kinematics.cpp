@@ -121,30 +121,51 @@ max_joint_speed : float
     Cap on every joint speed on top of the URDF velocity limits, rad/s (m/s).
 damping : DampingParams
     Damping of the pseudo-inverse.
+limit_avoidance_gain : float
+    k, 1/s: joint-limit avoidance in the null space of the camera Jacobian,
+    ``q_dot += (I - J^+ J) q_dot_0`` with ``q_dot_0_i = -k h_i sign(x_i) |x_i|^p``,
+    ``x_i = (q_i - m_i) / h_i`` (m_i the middle of the range, h_i half of it). A joint at a
+    limit is pushed at ``k h_i`` rad/s; the camera twist is unchanged. 0 turns it off.
+limit_avoidance_exponent : float
+    p >= 1: 1 is linear centring, larger values push mostly near the limits.
 )doc")
-      .def(py::init([](double dt, double margin, double max_speed, const DampingParams& damping) {
+      .def(py::init([](double dt, double margin, double max_speed, const DampingParams& damping,
+                       double avoidance_gain, double avoidance_exponent) {
              VelocityCommandParams params;
              params.dt = dt;
              params.position_margin = margin;
              params.max_joint_speed = max_speed;
              params.damping = damping;
+             params.limit_avoidance_gain = avoidance_gain;
+             params.limit_avoidance_exponent = avoidance_exponent;
              return params;
            }),
            py::arg("dt") = VelocityCommandParams{}.dt,
            py::arg("position_margin") = VelocityCommandParams{}.position_margin,
            py::arg("max_joint_speed") = VelocityCommandParams{}.max_joint_speed,
-           py::arg("damping") = DampingParams{})
+           py::arg("damping") = DampingParams{},
+           py::arg("limit_avoidance_gain") = VelocityCommandParams{}.limit_avoidance_gain,
+           py::arg("limit_avoidance_exponent") = VelocityCommandParams{}.limit_avoidance_exponent)
       .def_readwrite("dt", &VelocityCommandParams::dt)
       .def_readwrite("position_margin", &VelocityCommandParams::position_margin)
       .def_readwrite("max_joint_speed", &VelocityCommandParams::max_joint_speed)
       .def_readwrite("damping", &VelocityCommandParams::damping)
+      .def_readwrite("limit_avoidance_gain", &VelocityCommandParams::limit_avoidance_gain)
+      .def_readwrite("limit_avoidance_exponent", &VelocityCommandParams::limit_avoidance_exponent)
+      // run_servo copies the caller's settings before setting their dt.
+      .def("__copy__", [](const VelocityCommandParams& p) { return VelocityCommandParams(p); })
+      .def(
+          "__deepcopy__",
+          [](const VelocityCommandParams& p, const py::dict&) { return VelocityCommandParams(p); },
+          py::arg("memo"))
       .def("__repr__", [](const VelocityCommandParams& p) {
         std::ostringstream out;
         out << "VelocityCommandParams(dt=" << p.dt << ", position_margin=" << p.position_margin
             << ", max_joint_speed=" << p.max_joint_speed
             << ", damping=DampingParams(singular_value_threshold="
             << p.damping.singular_value_threshold << ", max_damping=" << p.damping.max_damping
-            << "))";
+            << "), limit_avoidance_gain=" << p.limit_avoidance_gain
+            << ", limit_avoidance_exponent=" << p.limit_avoidance_exponent << ")";
         return out.str();
       });
 
@@ -255,7 +276,8 @@ J_c, shape (6, n): q_dot -> camera twist (v, omega) of the camera origin, in the
           py::arg("q"), py::arg("camera_twist"), py::arg("params") = VelocityCommandParams{}, R"doc(
 q_dot = J_c^+ camera_twist with the damped pseudo-inverse and the joint limits respected.
 
-Joints that would come within ``position_margin`` of a limit within ``dt`` are clamped and
+The joint-limit avoidance (``limit_avoidance_gain``) adds a push toward the middles of the
+joint ranges in the null space of J_c: it never changes the camera twist. Joints that would come within ``position_margin`` of a limit within ``dt`` are clamped and
 the rest of the twist is re-solved with the other joints; then the vector is scaled
 uniformly so that every speed stays within min(URDF limit, ``max_joint_speed``).
 

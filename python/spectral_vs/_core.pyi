@@ -561,11 +561,15 @@ class VelocityCommandParams:
         position_margin: float = 0.01,  # rad (m)
         max_joint_speed: float = ...,  # rad/s (m/s); infinite by default
         damping: DampingParams = ...,
+        limit_avoidance_gain: float = 0.5,  # 1/s; 0 turns the null-space avoidance off
+        limit_avoidance_exponent: float = 3.0,  # >= 1; 1 is linear centring
     ) -> None: ...
     dt: float
     position_margin: float
     max_joint_speed: float
     damping: DampingParams
+    limit_avoidance_gain: float
+    limit_avoidance_exponent: float
 
 class VelocityCommand:
     """A joint velocity command and how the limits shaped it."""

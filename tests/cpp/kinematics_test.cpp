@@ -10,6 +10,7 @@
 #include <Eigen/LU>
 #include <cmath>
 #include <random>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -263,6 +264,131 @@ TEST(JointVelocities, AJointBeyondItsMarginOnlyMovesBack) {
   EXPECT_EQ(pushed.q_dot[1], 0.0);
   const VelocityCommand pulled = k.joint_velocities(q, -push, {0.05, 0.01, kInf, {1e-3, 1e-3}});
   EXPECT_NEAR(pulled.q_dot[1], -1.0, 1e-9);
+}
+
+// --- Joint-limit avoidance in the redundancy --------------------------------------------
+
+// A 7-joint arm (one more than the task needs): revolute joints about z, y, z, y, z, y, x
+// with offsets, asymmetric limits, no velocity limits (no scaling in these tests).
+Kinematics redundant_arm() {
+  const char* axes[] = {"0 0 1", "0 1 0", "0 0 1", "0 1 0", "0 0 1", "0 1 0", "1 0 0"};
+  const double lower[] = {-2.9, -2.0, -2.9, -2.1, -2.9, -1.5, -3.0};
+  const double upper[] = {2.9, 2.0, 2.9, 1.2, 2.9, 2.5, 3.0};
+  std::ostringstream xml;
+  xml << "<robot name='redundant'><link name='l0'/>";
+  for (int i = 0; i < 7; ++i) {
+    xml << "<link name='l" << i + 1 << "'/><joint name='r" << i + 1 << "' type='revolute'>"
+        << "<parent link='l" << i << "'/><child link='l" << i + 1 << "'/>"
+        << "<origin xyz='0.02 0.01 " << 0.1 + 0.03 * i << "' rpy='0.1 0 " << 0.2 * i << "'/>"
+        << "<axis xyz='" << axes[i] << "'/><limit lower='" << lower[i] << "' upper='" << upper[i]
+        << "' velocity='0' effort='10'/></joint>";
+  }
+  xml << "</robot>";
+  return Kinematics::from_urdf_string(xml.str(), "l0", "l7", camera_offset());
+}
+
+// The centring cost H of VelocityCommandParams::limit_avoidance_gain.
+double centring_cost(const Kinematics& k, const Eigen::VectorXd& q, double exponent) {
+  double cost = 0.0;
+  for (int i = 0; i < k.joint_count(); ++i) {
+    const double half = 0.5 * (k.upper_limits()[i] - k.lower_limits()[i]);
+    const double x = (q[i] - 0.5 * (k.upper_limits()[i] + k.lower_limits()[i])) / half;
+    cost += half * half * std::pow(std::abs(x), exponent + 1.0) / (exponent + 1.0);
+  }
+  return cost;
+}
+
+VelocityCommandParams avoiding(double gain, double exponent = 3.0) {
+  VelocityCommandParams params;
+  params.dt = 1e-3;  // the position limits stay out of the way
+  params.damping = {1e-3, 1e-3};
+  params.limit_avoidance_gain = gain;
+  params.limit_avoidance_exponent = exponent;
+  return params;
+}
+
+TEST(LimitAvoidance, LeavesTheCameraTwistUnchanged) {
+  const Kinematics k = redundant_arm();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (int trial = 0; trial < 30; ++trial) {
+    Eigen::VectorXd q(7);
+    for (int i = 0; i < 7; ++i) {  // anywhere up to 95% of the way to a limit
+      const double middle = 0.5 * (k.upper_limits()[i] + k.lower_limits()[i]);
+      q[i] = middle + 0.95 * unit(rng) * 0.5 * (k.upper_limits()[i] - k.lower_limits()[i]);
+    }
+    Twist twist;
+    for (int r = 0; r < 6; ++r) twist[r] = 0.05 * unit(rng);
+    const Eigen::MatrixXd J = k.jacobian(q);
+    for (const double exponent : {1.0, 3.0}) {
+      const VelocityCommand plain = k.joint_velocities(q, twist, avoiding(0.0));
+      const VelocityCommand avoided = k.joint_velocities(q, twist, avoiding(2.0, exponent));
+      ASSERT_GT(plain.min_singular_value, 1e-3) << "trial " << trial;
+      ASSERT_TRUE(avoided.position_limited.empty());
+      EXPECT_DOUBLE_EQ(avoided.velocity_scale, 1.0);
+      EXPECT_LT((J * plain.q_dot - twist).norm(), 1e-9) << "trial " << trial;
+      EXPECT_LT((J * avoided.q_dot - twist).norm(), 1e-9) << "trial " << trial;
+    }
+  }
+}
+
+TEST(LimitAvoidance, NullSpaceMotionLowersTheCentringCost) {
+  const Kinematics k = redundant_arm();
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (const double exponent : {1.0, 3.0}) {
+    for (int trial = 0; trial < 30; ++trial) {
+      Eigen::VectorXd q(7);
+      for (int i = 0; i < 7; ++i) {
+        const double middle = 0.5 * (k.upper_limits()[i] + k.lower_limits()[i]);
+        q[i] = middle + 0.9 * unit(rng) * 0.5 * (k.upper_limits()[i] - k.lower_limits()[i]);
+      }
+      const Twist twist = Twist::Zero();  // the command is the null-space motion alone
+      const Eigen::VectorXd motion = k.joint_velocities(q, twist, avoiding(1.0, exponent)).q_dot;
+      ASSERT_GT(motion.norm(), 1e-6) << "trial " << trial;
+      const double h = 1e-6;
+      const double slope = (centring_cost(k, q + h * motion, exponent) -
+                            centring_cost(k, q - h * motion, exponent)) /
+                           (2 * h);
+      // dH/dt = grad H^T N (-k grad H) = -k |N grad H|^2 = -|motion|^2 / k (k = 1).
+      EXPECT_LT(slope, 0.0) << "trial " << trial;
+      EXPECT_NEAR(slope, -motion.squaredNorm(), 1e-6 * (1.0 + motion.squaredNorm()));
+    }
+  }
+}
+
+TEST(LimitAvoidance, IsZeroAtTheMiddleOfEveryRange) {
+  const Kinematics k = redundant_arm();
+  const Eigen::VectorXd middle = 0.5 * (k.upper_limits() + k.lower_limits());
+  Twist twist;
+  twist << 0.01, -0.02, 0.015, 0.02, -0.01, 0.03;
+  const VelocityCommand plain = k.joint_velocities(middle, twist, avoiding(0.0));
+  const VelocityCommand avoided = k.joint_velocities(middle, twist, avoiding(5.0));
+  EXPECT_LT((avoided.q_dot - plain.q_dot).norm(), 1e-15);
+  EXPECT_EQ(k.joint_velocities(middle, Twist::Zero(), avoiding(5.0)).q_dot.norm(), 0.0);
+}
+
+TEST(LimitAvoidance, ChangesNothingWithoutRedundancy) {
+  const Kinematics k = arm();  // 6 joints for a 6-D twist: no null space
+  Eigen::VectorXd q(6);
+  q << 0.3, 1.7, 0.05, -0.4, 0.6, 2.2;  // j2 and j6 near their upper limits
+  Twist twist;
+  twist << 0.01, -0.02, 0.015, 0.02, -0.01, 0.03;
+  const VelocityCommand plain = k.joint_velocities(q, twist, avoiding(0.0));
+  const VelocityCommand avoided = k.joint_velocities(q, twist, avoiding(5.0));
+  EXPECT_LT((avoided.q_dot - plain.q_dot).norm(), 1e-12);
+}
+
+TEST(LimitAvoidance, RejectsBadSettings) {
+  const Kinematics k = redundant_arm();
+  expect_invalid([&] { k.joint_velocities(Eigen::VectorXd::Zero(7), Twist::Zero(), avoiding(-1)); },
+                 "limit_avoidance_gain");
+  expect_invalid(
+      [&] { k.joint_velocities(Eigen::VectorXd::Zero(7), Twist::Zero(), avoiding(kInf)); },
+      "limit_avoidance_gain");
+  expect_invalid(
+      [&] { k.joint_velocities(Eigen::VectorXd::Zero(7), Twist::Zero(), avoiding(1.0, 0.5)); },
+      "limit_avoidance_exponent");
 }
 
 // --- Bad input ------------------------------------------------------------------------

@@ -159,7 +159,9 @@ DAMPING = svs.DampingParams(singular_value_threshold=0.05, max_damping=0.05)
 def test_command_is_the_pseudo_inverse_away_from_singularities(kinematics):
     q = np.array([0.2, 0.5, -0.3, -1.4, 0.4, 1.1, 0.3])
     twist = np.array([0.02, -0.01, 0.03, 0.05, -0.02, 0.04])
-    command = kinematics.joint_velocities(q, twist, svs.VelocityCommandParams(damping=DAMPING))
+    # Without the joint-limit avoidance the command is the paper's minimum-norm eq. 18.
+    params = svs.VelocityCommandParams(damping=DAMPING, limit_avoidance_gain=0.0)
+    command = kinematics.joint_velocities(q, twist, params)
     J = kinematics.jacobian(q)
     assert command.min_singular_value > DAMPING.singular_value_threshold
     assert command.damping == 0.0
@@ -185,7 +187,9 @@ def test_command_stays_bounded_at_the_stretched_singularity(kinematics, offset):
 def test_command_respects_the_velocity_limits_keeping_the_direction(kinematics):
     q = np.array([0.2, 0.5, -0.3, -1.4, 0.4, 1.1, 0.3])
     twist = np.array([0.5, -0.3, 0.4, 1.0, -0.8, 0.6])
-    params = svs.VelocityCommandParams(max_joint_speed=0.8, damping=DAMPING, dt=1e-3)
+    params = svs.VelocityCommandParams(
+        max_joint_speed=0.8, damping=DAMPING, dt=1e-3, limit_avoidance_gain=0.0
+    )
     command = kinematics.joint_velocities(q, twist, params)
     unscaled = np.linalg.pinv(kinematics.jacobian(q)) @ twist
     assert np.max(np.abs(unscaled)) > 0.8
@@ -215,6 +219,85 @@ def test_command_never_crosses_a_position_limit(kinematics):
         )
         assert np.all(np.abs(command.q_dot) <= kinematics.velocity_limits + 1e-12)
     assert limited > 0  # the limits were actually exercised
+
+
+# --- Joint-limit avoidance in the redundancy ------------------------------------------------
+
+
+def centring_cost(kinematics, q, exponent):
+    """H of VelocityCommandParams.limit_avoidance_gain: sum h^2 |x|^(p+1) / (p+1)."""
+    lower, upper = kinematics.lower_limits, kinematics.upper_limits
+    half = (upper - lower) / 2
+    x = (np.asarray(q) - (upper + lower) / 2) / half
+    return float(np.sum(half**2 * np.abs(x) ** (exponent + 1) / (exponent + 1)))
+
+
+def avoiding(gain, exponent=3.0):
+    # dt small: no position limit is reached; no speed cap: no scaling.
+    return svs.VelocityCommandParams(
+        dt=1e-3, damping=DAMPING, limit_avoidance_gain=gain, limit_avoidance_exponent=exponent
+    )
+
+
+def near_limits(kinematics, rng, reach):
+    lower, upper = kinematics.lower_limits, kinematics.upper_limits
+    return (upper + lower) / 2 + reach * rng.uniform(-1, 1, 7) * (upper - lower) / 2
+
+
+def test_limit_avoidance_defaults_are_on_and_bound():
+    params = svs.VelocityCommandParams()
+    assert params.limit_avoidance_gain > 0 and params.limit_avoidance_exponent >= 1
+    assert "limit_avoidance_gain" in repr(params)
+    with pytest.raises(ValueError, match="limit_avoidance_gain"):
+        svs.Kinematics(URDF, BASE, TIP).joint_velocities(np.zeros(7), np.zeros(6), avoiding(-1))
+
+
+def test_limit_avoidance_leaves_the_camera_twist_unchanged(kinematics):
+    rng = np.random.default_rng(21)
+    for _ in range(30):
+        q = near_limits(kinematics, rng, 0.95)
+        twist = rng.normal(size=6) * 0.05
+        J = kinematics.jacobian(q)
+        for exponent in (1.0, 3.0):
+            plain = kinematics.joint_velocities(q, twist, avoiding(0.0))
+            avoided = kinematics.joint_velocities(q, twist, avoiding(2.0, exponent))
+            if plain.damping > 0:  # near a singularity: damped, not exact (none drawn here)
+                continue
+            assert not avoided.position_limited and avoided.velocity_scale == 1.0
+            np.testing.assert_allclose(J @ plain.q_dot, twist, atol=1e-9)
+            np.testing.assert_allclose(J @ avoided.q_dot, twist, atol=1e-9)
+
+
+@pytest.mark.parametrize("exponent", [1.0, 3.0])
+def test_limit_avoidance_moves_joints_toward_their_middles(kinematics, exponent):
+    rng = np.random.default_rng(22)
+    for _ in range(30):
+        q = near_limits(kinematics, rng, 0.9)
+        motion = np.asarray(
+            kinematics.joint_velocities(q, np.zeros(6), avoiding(1.0, exponent)).q_dot
+        )
+        assert np.linalg.norm(motion) > 1e-6
+        h = 1e-6
+        slope = (
+            centring_cost(kinematics, q + h * motion, exponent)
+            - centring_cost(kinematics, q - h * motion, exponent)
+        ) / (2 * h)
+        # dH/dt = -|N grad H|^2 k = -|motion|^2 / k with k = 1 1/s.
+        assert slope < 0
+        assert slope == pytest.approx(-(motion @ motion), rel=1e-5, abs=1e-9)
+
+
+def test_limit_avoidance_is_zero_at_the_middles(kinematics):
+    # The iiwa's ranges are symmetric: the middles are q = 0 (a singular configuration).
+    middle = (kinematics.upper_limits + kinematics.lower_limits) / 2
+    assert np.all(
+        np.asarray(kinematics.joint_velocities(middle, np.zeros(6), avoiding(5.0)).q_dot) == 0
+    )
+    twist = np.array([0.02, -0.01, 0.03, 0.05, -0.02, 0.04])
+    q = np.array([0.2, 0.5, -0.3, -1.4, 0.4, 1.1, 0.3])
+    moved = kinematics.joint_velocities(q, twist, avoiding(5.0)).q_dot
+    still = kinematics.joint_velocities(q, twist, avoiding(0.0)).q_dot
+    assert np.linalg.norm(np.asarray(moved) - still) > 1e-3  # away from the middles it acts
 
 
 # --- Bad input ----------------------------------------------------------------------------

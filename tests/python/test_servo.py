@@ -595,3 +595,77 @@ def test_start_poses_are_seeded_and_prefix_stable():
         assert np.array_equal(q5, q2) and t5 == t2
     assert not np.array_equal(two[0][0], other[0][0])
     assert all(t < 0.2 and np.degrees(r) < 30 for _, t, r in five)
+
+
+# --- Sliding along a joint limit (stop_at_joint_limit=False) -------------------------------
+
+
+class IntegratingArm:
+    """A kinematic arm: integrates q_dot for dt exactly, no camera (the servo is a stub)."""
+
+    def __init__(self, q):
+        self.q = np.array(q, dtype=float)
+        self.clock = 0.0
+        self.trajectory = [self.q.copy()]
+
+    def joint_positions(self):
+        return self.q.copy()
+
+    def send_joint_velocities(self, q_dot, dt):
+        self.q = self.q + np.asarray(q_dot) * dt
+        self.clock += dt
+        self.trajectory.append(self.q.copy())
+
+    def capture(self):
+        return svs.PointCloud(np.zeros((0, 3)))
+
+    def stop(self):
+        pass
+
+    def time(self):
+        return self.clock
+
+
+class PushingServo:
+    """A stub servo: the camera twist that would move one joint at a given speed."""
+
+    def __init__(self, arm, kinematics, joint, speed):
+        self.arm, self.kinematics, self.joint, self.speed = arm, kinematics, joint, speed
+
+    def reset(self):
+        pass
+
+    def step_record(self, cloud, motion, now=None, stamp=None):
+        from spectral_vs.servo import ServoStatus, _empty_record
+
+        twist = self.kinematics.jacobian(self.arm.q)[:, self.joint] * self.speed
+        record = _empty_record(0, 0)
+        record.twist = twist
+        return twist, ServoStatus("running"), record
+
+
+def test_sliding_along_a_joint_limit_never_crosses_it():
+    pybullet_data = pytest.importorskip("pybullet_data")
+    urdf = pybullet_data.getDataPath() + "/kuka_iiwa/model.urdf"
+    kinematics = svs.Kinematics(urdf, "lbr_iiwa_link_0", "lbr_iiwa_link_7")
+    lower, upper = kinematics.lower_limits, kinematics.upper_limits
+    q = np.array([-0.19, 0.34, 0.25, -1.9, -0.09, 1.38, -1.5])  # elbow 0.19 rad from its limit
+    margin = 0.01
+    for gain in (0.0, 0.5):
+        arm = IntegratingArm(q)
+        params = svs.VelocityCommandParams(
+            max_joint_speed=1.0, position_margin=margin, limit_avoidance_gain=gain
+        )
+        log = run_servo(
+            arm,
+            kinematics,
+            PushingServo(arm, kinematics, 3, -0.5),  # fold the elbow toward -2.09 rad
+            dt=0.1,
+            max_steps=60,
+            velocity_params=params,
+            stop_at_joint_limit=False,
+        )
+        assert log.reason == "max_steps"  # slid along the limit instead of stopping
+        path = np.array(arm.trajectory)
+        assert np.all(path >= lower + margin - 1e-9) and np.all(path <= upper - margin + 1e-9)
+        assert path[-1, 3] == pytest.approx(lower[3] + margin, abs=1e-9)  # held at the margin

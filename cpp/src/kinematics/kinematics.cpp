@@ -162,18 +162,34 @@ void check_command_params(const VelocityCommandParams& params) {
     fail("max_joint_speed must be > 0 (infinity for no cap), got ", params.max_joint_speed);
   }
   check_damping(params.damping);
+  if (!std::isfinite(params.limit_avoidance_gain) || params.limit_avoidance_gain < 0.0) {
+    fail("limit_avoidance_gain must be finite and >= 0 (1/s), got ", params.limit_avoidance_gain);
+  }
+  if (!std::isfinite(params.limit_avoidance_exponent) || params.limit_avoidance_exponent < 1.0) {
+    fail("limit_avoidance_exponent must be finite and >= 1, got ", params.limit_avoidance_exponent);
+  }
 }
 
-}  // namespace
+// q_dot_0 = -gain grad H, H = sum_i h_i^2 |x_i|^(p + 1) / (p + 1), x_i = (q_i - m_i) / h_i:
+// toward the middle of every bounded joint's range, zero there and for unbounded joints.
+Eigen::VectorXd centring_velocity(const Eigen::VectorXd& q, const Eigen::VectorXd& lower,
+                                  const Eigen::VectorXd& upper, double gain, double exponent) {
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(q.size());
+  if (gain == 0.0) return z;
+  for (Eigen::Index i = 0; i < q.size(); ++i) {
+    const double half = 0.5 * (upper[i] - lower[i]);
+    if (!std::isfinite(half) || !(half > 0.0)) continue;
+    const double x = std::clamp((q[i] - 0.5 * (upper[i] + lower[i])) / half, -1.0, 1.0);
+    z[i] = -gain * half * std::copysign(std::pow(std::abs(x), exponent), x);
+  }
+  return z;
+}
 
-DampedSolution damped_least_squares(const Eigen::MatrixXd& J, const Eigen::VectorXd& b,
-                                    const DampingParams& params) {
-  check_damping(params);
-  if (J.size() == 0) fail("J is empty: it needs at least 1 row and 1 column");
-  if (!J.allFinite()) fail("J has non-finite entries");
-  if (b.size() != J.rows()) fail("b: expected ", J.rows(), " entries (rows of J), got ", b.size());
-  if (!b.allFinite()) fail("b has non-finite entries");
-
+// The damped solution of J x = b plus the part of z in the null space of J, from one SVD.
+// The null space is that of the exact J (singular values above a rank tolerance count as
+// its row space, damped or not), so J (x - J^+_lambda b) = J N z = 0 to rounding.
+DampedSolution solve(const Eigen::MatrixXd& J, const Eigen::VectorXd& b,
+                     const DampingParams& params, const Eigen::VectorXd* z) {
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const Eigen::VectorXd& s = svd.singularValues();
   DampedSolution out;
@@ -186,7 +202,26 @@ DampedSolution damped_least_squares(const Eigen::MatrixXd& J, const Eigen::Vecto
     gains[i] = denominator > 0.0 ? s[i] / denominator : 0.0;
   }
   out.x = svd.matrixV() * gains.cwiseProduct(svd.matrixU().transpose() * b);
+  if (z != nullptr) {
+    const double tolerance = double(std::max(J.rows(), J.cols())) *
+                             std::numeric_limits<double>::epsilon() * s.maxCoeff();
+    const Eigen::Index rank = (s.array() > tolerance).count();  // s is sorted, decreasing
+    const auto V_row = svd.matrixV().leftCols(rank);
+    out.x += *z - V_row * (V_row.transpose() * *z);
+  }
   return out;
+}
+
+}  // namespace
+
+DampedSolution damped_least_squares(const Eigen::MatrixXd& J, const Eigen::VectorXd& b,
+                                    const DampingParams& params) {
+  check_damping(params);
+  if (J.size() == 0) fail("J is empty: it needs at least 1 row and 1 column");
+  if (!J.allFinite()) fail("J has non-finite entries");
+  if (b.size() != J.rows()) fail("b: expected ", J.rows(), " entries (rows of J), got ", b.size());
+  if (!b.allFinite()) fail("b has non-finite entries");
+  return solve(J, b, params, nullptr);
 }
 
 // --- Kinematics ------------------------------------------------------------------------
@@ -303,6 +338,12 @@ VelocityCommand Kinematics::joint_velocities(const Eigen::VectorXd& q, const Twi
   const Eigen::VectorXd high =
       ((model_->upper.array() - params.position_margin - q.array()) / params.dt).max(0.0);
 
+  // The push toward the middles of the ranges, applied in the null space of the free joints.
+  const Eigen::VectorXd q_dot_0 =
+      centring_velocity(q, model_->lower, model_->upper, params.limit_avoidance_gain,
+                        params.limit_avoidance_exponent);
+  const bool avoid = params.limit_avoidance_gain > 0.0;
+
   VelocityCommand out;
   out.q_dot = Eigen::VectorXd::Zero(n);
   std::vector<bool> locked(std::size_t(n), false);
@@ -317,8 +358,13 @@ VelocityCommand Kinematics::joint_velocities(const Eigen::VectorXd& q, const Twi
     }
     if (free.empty()) break;
     Eigen::MatrixXd J_free(6, Eigen::Index(free.size()));
-    for (std::size_t k = 0; k < free.size(); ++k) J_free.col(Eigen::Index(k)) = J.col(free[k]);
-    const DampedSolution solution = damped_least_squares(J_free, remaining, params.damping);
+    Eigen::VectorXd push_free(Eigen::Index(free.size()));
+    for (std::size_t k = 0; k < free.size(); ++k) {
+      J_free.col(Eigen::Index(k)) = J.col(free[k]);
+      push_free[Eigen::Index(k)] = q_dot_0[free[k]];
+    }
+    const DampedSolution solution =
+        solve(J_free, remaining, params.damping, avoid ? &push_free : nullptr);
     if (pass == 0) out.min_singular_value = solution.min_singular_value;
     out.damping = solution.damping;
 
