@@ -99,13 +99,19 @@ TEST(ModelAligner, OneIterationStepsMatchAlignOnASequenceOfViews) {
   }
 }
 
-TEST(ModelAligner, RunToConvergenceMatchesAlignAndFindsTheMotion) {
-  std::mt19937 rng(12);
-  const PointCloud model = table_scene(rng);
+// The servo's bounded search run to convergence (40 iterations at half gains).
+AlignParams converging_params() {
   AlignParams params = servo_params();
   params.max_iterations = 40;
   params.translation_gain = 0.5;
   params.rotation_gain = 0.5;
+  return params;
+}
+
+TEST(ModelAligner, RunToConvergenceMatchesAlignAndFindsTheMotion) {
+  std::mt19937 rng(12);
+  const PointCloud model = table_scene(rng);
+  const AlignParams params = converging_params();
   const Transform truth =
       motion(6.0, Eigen::Vector3d(-1, 0.5, 2), Eigen::Vector3d(0.04, -0.03, 0.02));
   const PointCloud scene = table_scene(rng).transformed(truth);
@@ -122,10 +128,7 @@ TEST(ModelAligner, RunToConvergenceMatchesAlignAndFindsTheMotion) {
 TEST(ModelAligner, FarClutterLeavesTheBoundedSearchAlone) {
   std::mt19937 rng(31);
   const PointCloud model = table_scene(rng);
-  AlignParams params = servo_params();
-  params.max_iterations = 40;
-  params.translation_gain = 0.5;
-  params.rotation_gain = 0.5;
+  const AlignParams params = converging_params();
   const Transform truth =
       motion(4.0, Eigen::Vector3d(0.5, -1, 2), Eigen::Vector3d(-0.05, 0.02, 0.01));
   const PointCloud scene = table_scene(rng).transformed(truth);
