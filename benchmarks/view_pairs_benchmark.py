@@ -5,7 +5,8 @@ The pairs are those of :mod:`spectral_vs.data`: two disjoint, overlapping pixel 
 a real Kinect scan (``table``: milk_cartoon_all_small_clorox.pcd, ``room``:
 five_people.pcd) at 640 x 480 and downscaled to 320 x 240, the current moved by a seeded
 random transform (5-60 degrees, up to 0.15 m), and views rendered in the simulation
-(``sim``: home pose against the ``large`` start poses of the servo experiments). Every
+(``sim``, ``sim-panda``: the iiwa's or the Panda's home view against views from the
+``large`` start poses of the servo experiments that keep 30% of the reference in view). Every
 method registers the reference (source) onto the current (target) and returns
 ``T_current_reference``, compared with the ground truth: rotation error (degrees) and
 the distance of the translations (mm). Success: under 5 degrees and 10 mm.
@@ -13,7 +14,7 @@ the distance of the translations (mm). Success: under 5 degrees and 10 mm.
 Methods (one thread each, ``OMP_NUM_THREADS=1``, ``OMP_WAIT_POLICY=PASSIVE``):
 
 * ``ours``: ``spectral_vs.align_views(reference, current, current_viewpoint=...)`` with its
-  defaults (skipped, with a message, while the library has no ``align_views``);
+  defaults (every length derived from the views);
 * ``o3d_icp``: Open3D point-to-plane ICP from the identity (``peers.register``);
 * ``o3d_ransac``: Open3D FPFH + RANSAC + point-to-plane ICP (``peers.register``);
 * ``kiss_icp``: KISS-Matcher + the same point-to-plane ICP
