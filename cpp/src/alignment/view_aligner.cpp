@@ -155,6 +155,11 @@ PlaneBalance plane_balance(const Points& normals) {
   return balance;
 }
 
+// The points (and normals) of `view` at the rows `kept`.
+PointCloud subset(const PointCloud& view, const std::vector<Eigen::Index>& kept) {
+  return PointCloud(detail::rows_of(view.points(), kept), detail::rows_of(view.normals(), kept));
+}
+
 // The view thinned by its balance: the points on its plane kept with the probability of
 // their weight (deterministically, by a running sum), the others all.
 PointCloud balanced(const PointCloud& view, const PlaneBalance& balance) {
@@ -169,7 +174,7 @@ PointCloud balanced(const PointCloud& view, const PlaneBalance& balance) {
     }
     kept.push_back(i);
   }
-  return PointCloud(detail::rows_of(view.points(), kept), detail::rows_of(view.normals(), kept));
+  return subset(view, kept);
 }
 
 // The view without its outliers in space: the points inside its box from the
@@ -200,7 +205,7 @@ PointCloud cropped(const PointCloud& view) {
   // Per-axis quantiles of a few points can leave a box that holds few of them.
   if (2 * kept.size() < std::size_t(points.rows())) return view;
   if (Eigen::Index(kept.size()) == points.rows()) return view;
-  return PointCloud(detail::rows_of(points, kept), detail::rows_of(view.normals(), kept));
+  return subset(view, kept);
 }
 
 // The points of the view off its dominant plane (all without one): the structure whose
@@ -211,7 +216,7 @@ PointCloud structure(const PointCloud& view, const PlaneBalance& balance) {
   for (Eigen::Index i = 0; i < view.points().rows(); ++i) {
     if (!balance.on_plane[std::size_t(i)]) kept.push_back(i);
   }
-  return PointCloud(detail::rows_of(view.points(), kept), detail::rows_of(view.normals(), kept));
+  return subset(view, kept);
 }
 
 // Stage: verification. The reference at a pose against the current view's depth image.
@@ -315,7 +320,7 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
     Hypothesis hypothesis;
     hypothesis.index = int(h);
     hypothesis.pose.R = refine_rotation(views.correlation, candidates[h].R, refine).R;
-    hypothesis.pose.offset = start - views.model.centroid();
+    hypothesis.pose.offset = centred.offset;
     hypothesis.pose.offset += placement.estimate(views.model.move(hypothesis.pose)).shift;
     // The EGI's maximum of two partial views lies up to 10-20 degrees from the truth: a
     // short ICP with pairs within a search voxel brings a right hypothesis close enough
