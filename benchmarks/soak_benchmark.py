@@ -43,6 +43,7 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +59,10 @@ DOC = report_lib.ROOT / "docs" / "reliability.md"
 #: Steps at which the resident memory is reported; the first is the end of the warm-up.
 MARKS = (100, 1000, 10_000)
 BLOCK = 1000
+#: Steps between the resident-memory samples and the partial results written on the way
+#: (a run stopped early still leaves its figures in the results file, "partial": true).
+CHECKPOINT = 500
+Checkpoint = Callable[[dict[str, Any]], None]
 #: The issue's targets: memory growth after the warm-up, and drift at the goal.
 MAX_GROWTH_MB = 5.0
 MAX_DRIFT_MM = 0.5
@@ -91,7 +96,9 @@ def memory_summary(memory: dict[int, float]) -> dict[str, Any]:
     }
 
 
-def soak_servo(steps: int, seed: int, talk: bool) -> dict[str, Any]:
+def soak_servo(
+    steps: int, seed: int, talk: bool, checkpoint: Checkpoint | None = None
+) -> dict[str, Any]:
     noise = sim.DepthNoise.kinect(seed=seed)
     sim_params = sim.SimParams(camera=sim.CameraParams(noise=noise))
     params = servo_lib.ServoParams()
@@ -110,6 +117,12 @@ def soak_servo(steps: int, seed: int, talk: bool) -> dict[str, Any]:
         servo = servo_lib.SpectralServo(reference, params)
         kinematics = robot.kinematics
         previous = None
+
+        def summary() -> dict[str, Any]:
+            return servo_summary(
+                errors_mm, errors_deg, poses, seconds, memory, holds, converged, stopped
+            )
+
         for step in range(1, steps + 1):
             q = robot.joint_positions()
             pose = np.asarray(kinematics.forward(q))
@@ -134,7 +147,7 @@ def soak_servo(steps: int, seed: int, talk: bool) -> dict[str, Any]:
             errors_mm.append(1000.0 * t_err)
             errors_deg.append(math.degrees(r_err))
             poses.append(robot.camera_pose())
-            if step in mark_at:
+            if step in mark_at or step % CHECKPOINT == 0:
                 memory[step] = rss_mb()
                 if talk:
                     median_ms = 1000 * statistics.median(seconds[-100:])
@@ -143,6 +156,21 @@ def soak_servo(steps: int, seed: int, talk: bool) -> dict[str, Any]:
                         f"{errors_deg[-1]:.4f} deg, step {median_ms:.1f} ms",
                         flush=True,
                     )
+            if checkpoint is not None and step % CHECKPOINT == 0 and step < steps:
+                checkpoint(summary())
+    return summary()
+
+
+def servo_summary(
+    errors_mm: list[float],
+    errors_deg: list[float],
+    poses: list[np.ndarray],
+    seconds: list[float],
+    memory: dict[int, float],
+    holds: int,
+    converged: int,
+    stopped: str | None,
+) -> dict[str, Any]:
     after = slice(MARKS[0], None) if len(errors_mm) > MARKS[0] else slice(0, None)
     # Drift: how far the held camera moved from where it was at the end of the warm-up.
     settled = poses[min(MARKS[0], len(poses)) - 1]
@@ -179,7 +207,9 @@ def random_motion(rng: np.random.Generator) -> np.ndarray:
     return T
 
 
-def soak_align(count: int, seed: int, data: Path, talk: bool) -> dict[str, Any]:
+def soak_align(
+    count: int, seed: int, data: Path, talk: bool, checkpoint: Checkpoint | None = None
+) -> dict[str, Any]:
     model = svs.load_cloud(str(data / "milk.pcd"))
     model = svs.estimate_normals(svs.voxel_downsample(model, 0.004), radius=0.012)
     c = np.asarray(model.points).mean(axis=0)
@@ -215,7 +245,7 @@ def soak_align(count: int, seed: int, data: Path, talk: bool) -> dict[str, Any]:
             if fixed_first is None:
                 fixed_first = pose
             fixed_change = max(fixed_change, float(np.abs(pose - fixed_first).max()))
-        if i in mark_at:
+        if i in mark_at or i % CHECKPOINT == 0:
             memory[i] = rss_mb()
             if talk:
                 print(
@@ -223,9 +253,21 @@ def soak_align(count: int, seed: int, data: Path, talk: bool) -> dict[str, Any]:
                     f"{1000 * statistics.median(seconds[-100:]):.1f} ms",
                     flush=True,
                 )
+        if checkpoint is not None and i % CHECKPOINT == 0 and i < count:
+            checkpoint(align_summary(errors_mm, errors_deg, seconds, memory, fixed_change))
+    return align_summary(errors_mm, errors_deg, seconds, memory, fixed_change)
+
+
+def align_summary(
+    errors_mm: list[float],
+    errors_deg: list[float],
+    seconds: list[float],
+    memory: dict[int, float],
+    fixed_change: float,
+) -> dict[str, Any]:
     ok = [e < 10.0 and d < 5.0 for e, d in zip(errors_mm, errors_deg, strict=True)]
     return {
-        "alignments": count,
+        "alignments": len(seconds),
         **memory_summary(memory),
         "align_ms_median_per_1000": block_medians(seconds),
         "success_rate": sum(ok) / len(ok),
@@ -240,10 +282,12 @@ def table(results: dict[str, Any]) -> str:
     rows = []
     for name, loop, unit in (("servo held at the goal", s, "steps"), ("align()", a, "alignments")):
         rss = loop["rss_mb"]
+        last = list(rss)[-1]
+        shown = [k for k in rss if int(k) in MARKS or k == last]
         rows.append(
             [
                 f"{name}, {loop[unit]} {unit}",
-                ", ".join(f"{v:.1f} MB at {k}" for k, v in rss.items()),
+                ", ".join(f"{rss[k]:.1f} MB at {k}" for k in shown),
                 f"{loop['growth_after_warmup_mb']:+.1f} MB",
                 ", ".join(
                     f"{v:.1f}"
@@ -270,7 +314,12 @@ def table(results: dict[str, Any]) -> str:
     )
     return (
         f"{head}\n\n{drift}\n\n`{results['command']}` at commit {results['commit']} on "
-        f"{results['machine']} (shared with other jobs), {results['wall_minutes']:.0f} min."
+        f"{results['machine']} (shared with other jobs), {results['wall_minutes']:.0f} min"
+        + (
+            " (stopped before the end: the figures of the steps run)."
+            if results["partial"]
+            else "."
+        )
     )
 
 
@@ -311,10 +360,21 @@ def main() -> int:
         "core_sha256": report_lib.core_sha256(),
         "machine": report_lib.machine(),
     }
+
+    def partial(name: str) -> Checkpoint:
+        def write(summary: dict[str, Any]) -> None:
+            args.output.parent.mkdir(parents=True, exist_ok=True)
+            wall = (time.perf_counter() - started) / 60.0
+            part = {**results, name: summary, "partial": True, "wall_minutes": wall}
+            args.output.write_text(report_lib.to_json({**part, "records": []}))
+
+        return write
+
     if "servo" in args.loops:
-        results["servo"] = soak_servo(args.steps, args.seed, talk)
+        results["servo"] = soak_servo(args.steps, args.seed, talk, partial("servo"))
     if "align" in args.loops:
-        results["align"] = soak_align(args.alignments, args.seed, args.data, talk)
+        results["align"] = soak_align(args.alignments, args.seed, args.data, talk, partial("align"))
+    results["partial"] = False
     results["wall_minutes"] = (time.perf_counter() - started) / 60.0
     results["records"] = []
     report_lib.write_results(results, args.output, RESULTS, report)
@@ -334,6 +394,7 @@ def merge(paths: list[Path], output: Path) -> int:
     results: dict[str, Any] = {}
     for part in parts:
         results.update({k: v for k, v in part.items() if k not in ("command", "wall_minutes")})
+    results["partial"] = any(part.get("partial", False) for part in parts)
     results["command"] = " & ".join(part["command"] for part in parts)
     results["wall_minutes"] = max(part["wall_minutes"] for part in parts)
     report_lib.write_results(results, output, RESULTS, report)
