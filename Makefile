@@ -11,12 +11,15 @@ PYTAG := $(shell $(PYTHON) -c "import sys; print(f'cp{sys.version_info[0]}{sys.v
 BUILD_DIR = $(firstword $(wildcard build/$(PYTAG)-*))
 
 APT_PACKAGES := build-essential pkg-config libpcl-dev libeigen3-dev libfftw3-dev \
-	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev
+	liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libgtest-dev \
+	clang-14 libclang-rt-14-dev
+# clang-14 and libclang-rt-14-dev (Debian 12's Clang and its sanitizer and libFuzzer
+# runtimes) build the fuzz targets of `make fuzz`.
 PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
 PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" "matplotlib>=3.7" ruff mypy
 PIP_BENCH := "open3d>=0.19" "small_gicp>=1.0" "kiss-matcher>=1.0"  # the `bench` extra of pyproject.toml
 
-.PHONY: all demo test test-cpp test-python test-sanitize install system-deps venv bench bench-peers bench-servo-peers bench-views experiments \
+.PHONY: all demo test test-cpp test-python test-sanitize test-tsan fuzz install system-deps venv bench bench-peers bench-servo-peers bench-views experiments \
 	format lint clean
 
 all: install
@@ -42,6 +45,25 @@ test-sanitize: system-deps venv
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --preset asan
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --build --preset asan
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" SPECTRAL_VS_DATA=$(abspath $(DATA)) ctest --preset asan
+
+# The C++ tests of threads (parallel alignments, one ModelAligner shared by two threads,
+# the same result with one and two threads, FFTW's and the SO(3) search's threads) under
+# ThreadSanitizer, in build/tsan (preset "tsan"; no suppressions). About 5 minutes of
+# build and 3 of tests on 2 cores (docs/reliability.md).
+test-tsan: system-deps venv
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --preset tsan
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --build --preset tsan
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" SPECTRAL_VS_DATA=$(abspath $(DATA)) ctest --preset tsan
+
+# libFuzzer (Clang 14, ASan + UBSan) on the PCD and PLY readers, the URDF-to-chain path
+# of Kinematics and align(), FUZZ_SECONDS each, in build/fuzz (preset "fuzz"); corpora
+# seeded from $(DATA) and small generated files, kept between runs. Any crash, sanitizer
+# report, uncaught exception or hang fails it (fuzz/run_fuzzers.sh, docs/reliability.md).
+FUZZ_SECONDS ?= 60
+fuzz: system-deps venv
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --preset fuzz
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --build --preset fuzz
+	fuzz/run_fuzzers.sh build/fuzz $(FUZZ_SECONDS) $(abspath $(DATA))
 
 # Installs only the Debian packages that are missing, so a second run is instant.
 system-deps:
@@ -100,7 +122,7 @@ bench-views: install
 
 format:
 	$(VENV)/bin/ruff format python tests benchmarks
-	find cpp bindings tests/cpp examples -name '*.[ch]pp' | xargs clang-format -i
+	find cpp bindings tests/cpp examples fuzz -name '*.[ch]pp' | xargs clang-format -i
 
 lint:
 	$(VENV)/bin/ruff check python tests benchmarks

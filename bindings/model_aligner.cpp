@@ -39,7 +39,9 @@ One model aligned onto many scenes with the same settings.
 rounding). With ``global_search = False`` and ``max_translation > 0`` (the servo's bounded
 search) the model's side is prepared once (centred points, EGI coefficients) and the FFT
 plans of the translation grid are kept while its size stays the same; otherwise each call
-runs the plain alignment. Not thread-safe.
+runs the plain alignment. ``align`` may be called from several threads: calls on one
+object share its buffers and run one after the other (the GIL is released while they
+wait); use one ModelAligner per thread for parallel alignments.
 
 Parameters
 ----------

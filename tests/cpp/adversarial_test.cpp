@@ -183,16 +183,30 @@ struct Case {
 std::vector<Case> cases() {
   std::vector<Case> c = {
       // PointCloud construction: the invariant "finite points, unit normals" holds.
-      {"cloud_nan_point", [] { PointCloud(rows({{0, 0, 0}, {kNaN, 0, 0}})); },
+      {"cloud_nan_point",
+       [] {
+         PointCloud(rows({{0, 0, 0}, {kNaN, 0, 0}}));
+       },
        "points: row 1 is not finite"},
-      {"cloud_inf_point", [] { PointCloud(rows({{kInf, 0, 0}})); }, "points: row 0 is not finite"},
+      {"cloud_inf_point",
+       [] {
+         PointCloud(rows({{kInf, 0, 0}}));
+       },
+       "points: row 0 is not finite"},
       {"cloud_nan_normal",
-       [] { PointCloud(three_points(), rows({{0, 0, 1}, {0, kNaN, 1}, {0, 0, 1}})); },
+       [] {
+         PointCloud(three_points(), rows({{0, 0, 1}, {0, kNaN, 1}, {0, 0, 1}}));
+       },
        "normals: row 1 is not finite or has zero length"},
       {"cloud_zero_normal",
-       [] { PointCloud(three_points(), rows({{0, 0, 1}, {0, 0, 0}, {0, 0, 1}})); },
+       [] {
+         PointCloud(three_points(), rows({{0, 0, 1}, {0, 0, 0}, {0, 0, 1}}));
+       },
        "normals: row 1 is not finite or has zero length"},
-      {"cloud_normal_rows", [] { PointCloud(three_points(), rows({{0, 0, 1}})); },
+      {"cloud_normal_rows",
+       [] {
+         PointCloud(three_points(), rows({{0, 0, 1}}));
+       },
        "normals: expected 3 rows"},
       {"cloud_transformed_nan", [] { object().transformed(Transform::Constant(kNaN)); },
        "T_target_source"},
@@ -240,6 +254,24 @@ std::vector<Case> cases() {
        },
        "'?"
        "?' that is not a number"},  // split: "??'" would be a trigraph
+      // Found by fuzz/pcd_fuzzer: PCL's header reader reads on past DATA and took binary
+      // data spelling "COLUMNS" for a FIELDS line, then crashed reading the data.
+      {"load_binary_data_spelling_a_header_line",
+       [] {
+         std::string data = "COLUMNS\xca\xb6\xca\xff\xff\xff\xff\xff";
+         data.resize(2 * 12, '\0');
+         load_cloud(
+             write_file("columns.pcd", replaced(kHeader, "DATA ascii", "DATA binary") + data));
+       },
+       "the data after the DATA line begins with 'COLUMNS"},
+      {"load_binary_data_after_an_empty_line_spelling_a_header_line",
+       [] {
+         std::string data = "\nPOINTS 9\n";
+         data.resize(2 * 12, '\0');
+         load_cloud(
+             write_file("points.pcd", replaced(kHeader, "DATA ascii", "DATA binary") + data));
+       },
+       "the data after the DATA line begins with 'POINTS'"},
       {"load_width_height_mismatch",
        [] {
          load_cloud(
@@ -339,9 +371,14 @@ std::vector<Case> cases() {
       {"downsample_tiny", [] { voxel_downsample(object(), 1e-12); }, "is too small"},
       {"downsample_huge", [] { voxel_downsample(object(), 1e7); }, "voxel_size must be <= 1e+06"},
       {"downsample_one_point",
-       [] { EXPECT_EQ(voxel_downsample(PointCloud(rows({{1, 2, 3}})), 0.01).size(), 1u); }, ""},
+       [] {
+         EXPECT_EQ(voxel_downsample(PointCloud(rows({{1, 2, 3}})), 0.01).size(), 1u);
+       },
+       ""},
       {"downsample_identical",
-       [] { EXPECT_EQ(voxel_downsample(repeated({1, 2, 3}, {0, 0, 1}, 50), 0.01).size(), 1u); },
+       [] {
+         EXPECT_EQ(voxel_downsample(repeated({1, 2, 3}, {0, 0, 1}, 50), 0.01).size(), 1u);
+       },
        ""},
       {"downsample_opposite_normals_cancel",  // documented: the voxel is dropped
        [] {
@@ -397,7 +434,10 @@ std::vector<Case> cases() {
          estimate_normals(object(), p);
        },
        "viewpoint must be finite"},
-      {"normals_one_point", [] { estimate_normals(PointCloud(rows({{0, 0, 0}}))); },
+      {"normals_one_point",
+       [] {
+         estimate_normals(PointCloud(rows({{0, 0, 0}})));
+       },
        "no point has enough neighbours"},
       {"normals_identical_points",
        [] { estimate_normals(PointCloud(Points(Eigen::RowVector3d(1, 2, 3).replicate(50, 1)))); },
@@ -471,19 +511,41 @@ std::vector<Case> cases() {
       {"egi_bandwidth_large", [] { egi_histogram(object().normals(), 129); },
        "bandwidth must be in [1, 128]"},
       {"egi_no_normals", [] { egi_histogram(Points(), 4); }, "normals is empty"},
-      {"egi_nan_normal", [] { egi_histogram(rows({{kNaN, 0, 1}}), 4); }, "normals: row 0"},
-      {"egi_zero_normal", [] { egi_histogram(rows({{0, 0, 0}}), 4); }, "normals: row 0"},
+      {"egi_nan_normal",
+       [] {
+         egi_histogram(rows({{kNaN, 0, 1}}), 4);
+       },
+       "normals: row 0"},
+      {"egi_zero_normal",
+       [] {
+         egi_histogram(rows({{0, 0, 0}}), 4);
+       },
+       "normals: row 0"},
       {"egi_weights_length",
        [] {
          const Eigen::VectorXd w = Eigen::VectorXd::Ones(3);
          egi_histogram(object().normals(), 4, &w);
        },
        "weights: expected 2000 entries"},
-      {"egi_cell_bandwidth_zero", [] { egi_cell({0, 0, 1}, 0); },
+      {"egi_cell_bandwidth_zero",
+       [] {
+         egi_cell({0, 0, 1}, 0);
+       },
        "bandwidth"},  // was a division by 0
-      {"egi_cell_nan", [] { egi_cell({kNaN, 0, 1}, 8); }, "normal must be finite and non-zero"},
-      {"egi_coefficients_nan", [] { egi_coefficients(rows({{kNaN, 0, 1}}), 4); }, "normal"},
-      {"egi_coefficients_no_normals", [] { egi_coefficients(PointCloud(rows({{0, 0, 0}})), 4); },
+      {"egi_cell_nan",
+       [] {
+         egi_cell({kNaN, 0, 1}, 8);
+       },
+       "normal must be finite and non-zero"},
+      {"egi_coefficients_nan",
+       [] {
+         egi_coefficients(rows({{kNaN, 0, 1}}), 4);
+       },
+       "normal"},
+      {"egi_coefficients_no_normals",
+       [] {
+         egi_coefficients(PointCloud(rows({{0, 0, 0}})), 4);
+       },
        "no normals"},
       {"smooth_negative",
        [] {
@@ -711,7 +773,9 @@ std::vector<Case> cases() {
        },
        ""},
       {"align_identical_points_model",
-       [] { expect_not_converged(align(repeated({0.1, 0, 0}, {0, 0, 1}, 100), object(), fast())); },
+       [] {
+         expect_not_converged(align(repeated({0.1, 0, 0}, {0, 0, 1}, 100), object(), fast()));
+       },
        ""},
       {"align_one_point_scene",
        [] {

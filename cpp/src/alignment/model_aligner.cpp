@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <optional>
 #include <vector>
 
@@ -54,6 +55,9 @@ struct ModelAligner::Impl {
   VoxelGrid target, moving;
   detail::FitnessMap fitness_map;
   ModelAlignerTimings timings;
+  // Held by each align() for the whole call: calls from several threads share the
+  // buffers above, so they run one at a time (guarded by ThreadSanitizer in threads_test).
+  mutable std::mutex busy;
 
   bool local() const { return !params.global_search && params.max_translation > 0.0; }
 
@@ -193,8 +197,9 @@ AlignResult ModelAligner::align(const PointCloud& scene) {
 }
 
 AlignResult ModelAligner::align(const PointCloud& scene, const Transform& initial_guess) {
-  const Clock::time_point started = Clock::now();
   Impl& im = *impl_;
+  const std::lock_guard<std::mutex> lock(im.busy);
+  const Clock::time_point started = Clock::now();
   require_non_empty(scene, "scene");
   require_normals(scene, "scene");
   require_rigid_transform(initial_guess, "initial_guess");
@@ -214,6 +219,9 @@ AlignResult ModelAligner::align(const PointCloud& scene, const Transform& initia
 const AlignParams& ModelAligner::params() const { return impl_->params; }
 const PointCloud& ModelAligner::model() const { return impl_->model; }
 const ShCoefficients& ModelAligner::model_coefficients() const { return impl_->model_coefficients; }
-const ModelAlignerTimings& ModelAligner::last_timings() const { return impl_->timings; }
+ModelAlignerTimings ModelAligner::last_timings() const {
+  const std::lock_guard<std::mutex> lock(impl_->busy);
+  return impl_->timings;
+}
 
 }  // namespace spectral_vs

@@ -76,6 +76,34 @@ bool is_number(const std::string& token) {
   return end != begin && *end == '\0';
 }
 
+// PCL's header reader does not stop at the DATA line: it reads on, skipping empty and
+// comment lines, and takes the next line that begins with a header keyword (a prefix
+// compare: "FIELDSx" counts) as part of the header, while the data still starts after
+// DATA. Binary data whose first bytes spell "COLUMNS" so redefined the fields after the
+// sizes had been read, and PCL's reader crashed (found by fuzz/pcd_fuzzer). Such a file
+// is refused: PCL cannot read it as written.
+template <class Bad>
+void check_after_data_line(std::ifstream& file, const Bad& bad) {
+  static const char* const kKeywords[] = {"VERSION",   "FIELDS", "COLUMNS", "SIZE",
+                                          "TYPE",      "COUNT",  "WIDTH",   "HEIGHT",
+                                          "VIEWPOINT", "POINTS", "DATA"};
+  const std::streampos data_start = file.tellg();
+  std::string line;
+  for (int lines = 0; lines < 256 && std::getline(file, line); ++lines) {
+    const std::vector<std::string> tokens = split(line);
+    if (tokens.empty() || tokens[0][0] == '#') continue;
+    for (const char* keyword : kKeywords) {
+      if (tokens[0].rfind(keyword, 0) == 0) {
+        bad("the data after the DATA line begins with ", in_quotes(tokens[0]),
+            ", which PCL's reader takes for a header line");
+      }
+    }
+    break;
+  }
+  file.clear();
+  file.seekg(data_start);
+}
+
 // PCL's PCD reader trusts the header: a header that does not match the data can make it
 // read past its buffers (a crash) or return zeros for unparsable ASCII values. So the
 // whole structure is checked here first: field sizes and types, WIDTH x HEIGHT = POINTS,
@@ -133,6 +161,7 @@ void check_pcd(const std::string& path) {
       bad("unknown header line ", in_quotes(line));
     }
   }
+  check_after_data_line(file, bad);
   if (fields.empty()) bad("no FIELDS");
   if (counts.empty()) counts.assign(fields.size(), "1");
   if (sizes.size() != fields.size() || types.size() != fields.size() ||

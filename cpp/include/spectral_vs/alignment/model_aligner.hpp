@@ -35,7 +35,12 @@ struct ModelAlignerTimings {
 /// and spectrum, the iterations, and the fitness at the final pose (the same value as
 /// align()'s, from a map of the scene only around the model there). In the other modes
 /// (global search, or the unbounded translation of the paper) each call runs `align`.
-/// Not safe to call from two threads at once.
+///
+/// Threads: `align` may be called on one object from several threads; the calls share
+/// the object's buffers and so run one after the other (each waits for the running one),
+/// each giving what it gives alone. For alignments that run in parallel, use one
+/// ModelAligner per thread. Moving or destroying the object while a call runs is not
+/// allowed, as for any C++ object.
 class ModelAligner {
  public:
   /// @throws std::invalid_argument for an empty model, missing normals or invalid
@@ -56,8 +61,9 @@ class ModelAligner {
   const PointCloud& model() const;
   /// The model's EGI coefficients (size bandwidth^2), as `egi_coefficients` gives them.
   const ShCoefficients& model_coefficients() const;
-  /// Stage times of the last `align` (zero but `total` when it ran plain `align`).
-  const ModelAlignerTimings& last_timings() const;
+  /// Stage times of the last `align` to finish (zero but `total` when it ran plain
+  /// `align`); a copy, so that reading it while another thread aligns is safe.
+  ModelAlignerTimings last_timings() const;
 
  private:
   struct Impl;
