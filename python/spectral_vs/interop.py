@@ -102,11 +102,11 @@ def to_open3d(cloud: Any, colors: npt.ArrayLike | None = None) -> Any:
     source = as_cloud(cloud, "cloud")
     o3d = _open3d()
     out = o3d.geometry.PointCloud()
-    out.points = o3d.utility.Vector3dVector(np.asarray(source.points, dtype=np.float64))
+    out.points = o3d.utility.Vector3dVector(np.array(source.points, dtype=np.float64))
     if source.has_normals:
-        out.normals = o3d.utility.Vector3dVector(np.asarray(source.normals, dtype=np.float64))
+        out.normals = o3d.utility.Vector3dVector(np.array(source.normals, dtype=np.float64))
     if colors is not None:
-        rgb = np.asarray(colors, dtype=np.float64)
+        rgb = np.array(colors, dtype=np.float64)
         if rgb.shape != (len(source), 3):
             raise ValueError(
                 f"colors must have shape ({len(source)}, 3), one RGB row per point, got {rgb.shape}"

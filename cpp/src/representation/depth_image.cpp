@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 namespace spectral_vs {
@@ -25,32 +26,58 @@ void check(const DepthCloudParams& params) {
   }
 }
 
-// The depth in metres, NaN where the pixel is invalid (see DepthCloudParams), row-major,
-// in a buffer kept per thread (one frame of the same size per servo step).
+[[noreturn]] void no_valid_pixel(Eigen::Index pixels, double scale,
+                                 const DepthCloudParams& params) {
+  fail("depth has no valid pixel: all ", pixels, " are 0, non-finite or outside [min_depth, ",
+       "max_depth] = [", params.min_depth, ", ", params.max_depth, "] m (depth_scale ", scale,
+       " units per metre)");
+}
+
+// Whether the metre value z is a valid depth; written without branches (the loops over
+// pixels vectorise), NaN failing every comparison.
+inline bool valid_depth(double z, double low, double high) {
+  return (z > 0.0) & (z >= low) & (z <= high) & (z < std::numeric_limits<double>::infinity());
+}
+
+// The depth in metres, row-major, NaN where the pixel is invalid (see DepthCloudParams):
+// the image itself when it is one block of metres whose every pixel is valid or NaN (a
+// renderer's or a driver's float frame), else a copy in a buffer kept per thread (one
+// frame of the same size per servo step).
 template <typename Image>
-const std::vector<double>& metric_depth(const Eigen::Ref<const Image>& depth, double scale,
-                                        const DepthCloudParams& params) {
-  thread_local std::vector<double> metres;
+const double* metric_depth(const Eigen::Ref<const Image>& depth, double scale,
+                           const DepthCloudParams& params) {
   const Eigen::Index h = depth.rows(), w = depth.cols();
+  const double low = params.min_depth, high = params.max_depth;
+  if constexpr (std::is_same_v<typename Image::Scalar, double>) {
+    if (scale == 1.0 && depth.outerStride() == w) {
+      std::size_t valid = 0, missing = 0;  // the rest: finite or infinite but invalid
+      const double* in = depth.data();
+      for (Eigen::Index i = 0; i < h * w; ++i) {
+        valid += valid_depth(in[i], low, high);
+        missing += in[i] != in[i];  // NaN
+      }
+      if (valid == 0) no_valid_pixel(h * w, scale, params);
+      if (valid + missing == std::size_t(h * w)) return in;
+    }
+  }
+  thread_local std::vector<double> metres;
   metres.resize(std::size_t(h) * std::size_t(w));
   std::size_t valid = 0;
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (Eigen::Index v = 0; v < h; ++v) {
+    // A row of a row-major image is contiguous; rows are outerStride() apart.
+    const auto* in = depth.data() + v * depth.outerStride();
     double* row = metres.data() + std::size_t(v) * std::size_t(w);
     for (Eigen::Index u = 0; u < w; ++u) {
       // Divided rather than multiplied by 1 / scale: metres images pass through exactly.
-      const double z = double(depth(v, u)) / scale;
-      const bool ok = std::isfinite(z) && z > 0.0 && z >= params.min_depth && z <= params.max_depth;
+      const double z = double(in[u]) / scale;
+      const bool ok = valid_depth(z, low, high);
       row[u] = ok ? z : nan;
       valid += ok;
     }
   }
-  if (valid == 0) {
-    fail("depth has no valid pixel: all ", h * w, " are 0, non-finite or outside [min_depth, ",
-         "max_depth] = [", params.min_depth, ", ", params.max_depth, "] m (depth_scale ", scale,
-         " units per metre)");
-  }
-  return metres;
+  if (valid == 0) no_valid_pixel(h * w, scale, params);
+  return metres.data();
 }
 
 template <typename Image>
@@ -62,10 +89,10 @@ std::vector<double>& scan(const Eigen::Ref<const Image>& depth, const Eigen::Mat
   const PinholeIntrinsics intrinsics = intrinsics_from_matrix(K, "K");
   detail::check_organized(intrinsics, params);
   check(params);
-  const std::vector<double>& metres =
+  const double* metres =
       metric_depth<Image>(depth, params.depth_scale.value_or(default_scale), params);
   thread_local std::vector<double> rows;
-  detail::scan_depth(metres.data(), int(depth.rows()), int(depth.cols()), intrinsics, params,
+  detail::scan_depth(metres, int(depth.rows()), int(depth.cols()), intrinsics, params,
                      {params.normals, every_pixel}, rows);
   return rows;
 }
