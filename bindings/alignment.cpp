@@ -1,5 +1,6 @@
 // Bindings of the aligner (paper, section II-D and Algorithm 1).
 #include "conversions.hpp"
+#include "settings.hpp"
 
 #include <spectral_vs/alignment/aligner.hpp>
 
@@ -22,8 +23,11 @@ constexpr Choices<AlignStopReason, 3> kStopReasons{
 }  // namespace
 
 void define_alignment(py::module_& m) {
-  py::class_<AlignParams>(m, "AlignParams", R"doc(
+  py::class_<AlignParams> align_params(m, "AlignParams", R"doc(
 Settings of :func:`align`; every field has the default measured best.
+
+Takes its fields as keyword arguments, ``AlignParams(voxel_size=0.005, threads=2)``; the
+repr shows every field.
 
 Attributes
 ----------
@@ -107,12 +111,8 @@ threads : int
 max_voxels : int
     Memory cap: any grid over this many voxels is refused with ``ValueError`` before it
     is allocated (default 2^27; the largest grids take about 28 bytes per voxel).
-)doc")
-      .def(py::init<>())
-      .def("__copy__", [](const AlignParams& p) { return AlignParams(p); })
-      .def(
-          "__deepcopy__", [](const AlignParams& p, const py::dict&) { return AlignParams(p); },
-          py::arg("memo"))
+)doc");
+  define_settings(align_params)
       .def_readwrite("voxel_size", &AlignParams::voxel_size)
       .def_readwrite("bandwidth", &AlignParams::bandwidth)
       .def_readwrite("translation_gain", &AlignParams::translation_gain)
@@ -157,14 +157,7 @@ max_voxels : int
       .def_readwrite("threads", &AlignParams::threads)
       .def_property(
           "max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
-          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
-      .def("__repr__", [](const AlignParams& p) {
-        std::ostringstream out;
-        out << "AlignParams(voxel_size=" << p.voxel_size << ", bandwidth=" << p.bandwidth
-            << ", global_search=" << (p.global_search ? "True" : "False")
-            << ", hypotheses=" << p.hypotheses << ", max_iterations=" << p.max_iterations << ")";
-        return out.str();
-      });
+          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; });
 
   py::class_<AlignIteration>(m, "AlignIteration", "One iteration of Algorithm 1, after its update.")
       .def_readonly("translation_cost", &AlignIteration::translation_cost,

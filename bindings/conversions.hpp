@@ -109,6 +109,7 @@ inline Points normals_of(const py::handle& object) {
 }
 
 void define_representation(py::module_& m);
+void define_depth_image(py::module_& m);
 void define_translation(py::module_& m);
 void define_rotation(py::module_& m);
 void define_alignment(py::module_& m);

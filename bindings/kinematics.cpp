@@ -1,6 +1,7 @@
 // Bindings of the robot kinematics (paper, section II-D, eq. 18): the chain from a URDF,
 // the camera Jacobian and the damped least-squares joint velocity command.
 #include "conversions.hpp"
+#include "settings.hpp"
 
 #include <spectral_vs/kinematics/kinematics.hpp>
 
@@ -58,7 +59,7 @@ std::string joint_list(const std::vector<int>& joints) {
 }  // namespace
 
 void define_kinematics(py::module_& m) {
-  py::class_<DampingParams>(m, "DampingParams", R"doc(
+  py::class_<DampingParams> damping_params(m, "DampingParams", R"doc(
 Damping of the least-squares pseudo-inverse (Nakamura; Chiaverini).
 
 With s_min the smallest singular value of J, ``lambda^2 = (1 - (s_min / eps)^2) lambda_max^2``
@@ -70,23 +71,10 @@ singular_value_threshold : float
     eps, where damping starts (units of J: m/rad for linear rows, 1 for angular rows).
 max_damping : float
     lambda_max, the damping at s_min = 0 (same unit).
-)doc")
-      .def(py::init([](double threshold, double max_damping) {
-             DampingParams params;
-             params.singular_value_threshold = threshold;
-             params.max_damping = max_damping;
-             return params;
-           }),
-           py::arg("singular_value_threshold") = DampingParams{}.singular_value_threshold,
-           py::arg("max_damping") = DampingParams{}.max_damping)
+)doc");
+  define_settings(damping_params)
       .def_readwrite("singular_value_threshold", &DampingParams::singular_value_threshold)
-      .def_readwrite("max_damping", &DampingParams::max_damping)
-      .def("__repr__", [](const DampingParams& p) {
-        std::ostringstream out;
-        out << "DampingParams(singular_value_threshold=" << p.singular_value_threshold
-            << ", max_damping=" << p.max_damping << ")";
-        return out.str();
-      });
+      .def_readwrite("max_damping", &DampingParams::max_damping);
 
   py::class_<DampedSolution>(m, "DampedSolution", "x = J^+ b with the damping that was used.")
       .def_readonly("x", &DampedSolution::x)
@@ -108,7 +96,7 @@ max_damping : float
       py::arg("J"), py::arg("b"), py::arg("params") = DampingParams{},
       "x = J^+ b with the damped pseudo-inverse of DampingParams (SVD of J).");
 
-  py::class_<VelocityCommandParams>(m, "VelocityCommandParams", R"doc(
+  py::class_<VelocityCommandParams> command_params(m, "VelocityCommandParams", R"doc(
 Settings of :meth:`Kinematics.joint_velocities`.
 
 Parameters
@@ -128,46 +116,14 @@ limit_avoidance_gain : float
     limit is pushed at ``k h_i`` rad/s; the camera twist is unchanged. 0 turns it off.
 limit_avoidance_exponent : float
     p >= 1: 1 is linear centring, larger values push mostly near the limits.
-)doc")
-      .def(py::init([](double dt, double margin, double max_speed, const DampingParams& damping,
-                       double avoidance_gain, double avoidance_exponent) {
-             VelocityCommandParams params;
-             params.dt = dt;
-             params.position_margin = margin;
-             params.max_joint_speed = max_speed;
-             params.damping = damping;
-             params.limit_avoidance_gain = avoidance_gain;
-             params.limit_avoidance_exponent = avoidance_exponent;
-             return params;
-           }),
-           py::arg("dt") = VelocityCommandParams{}.dt,
-           py::arg("position_margin") = VelocityCommandParams{}.position_margin,
-           py::arg("max_joint_speed") = VelocityCommandParams{}.max_joint_speed,
-           py::arg("damping") = DampingParams{},
-           py::arg("limit_avoidance_gain") = VelocityCommandParams{}.limit_avoidance_gain,
-           py::arg("limit_avoidance_exponent") = VelocityCommandParams{}.limit_avoidance_exponent)
+)doc");
+  define_settings(command_params)
       .def_readwrite("dt", &VelocityCommandParams::dt)
       .def_readwrite("position_margin", &VelocityCommandParams::position_margin)
       .def_readwrite("max_joint_speed", &VelocityCommandParams::max_joint_speed)
       .def_readwrite("damping", &VelocityCommandParams::damping)
       .def_readwrite("limit_avoidance_gain", &VelocityCommandParams::limit_avoidance_gain)
-      .def_readwrite("limit_avoidance_exponent", &VelocityCommandParams::limit_avoidance_exponent)
-      // run_servo copies the caller's settings before setting their dt.
-      .def("__copy__", [](const VelocityCommandParams& p) { return VelocityCommandParams(p); })
-      .def(
-          "__deepcopy__",
-          [](const VelocityCommandParams& p, const py::dict&) { return VelocityCommandParams(p); },
-          py::arg("memo"))
-      .def("__repr__", [](const VelocityCommandParams& p) {
-        std::ostringstream out;
-        out << "VelocityCommandParams(dt=" << p.dt << ", position_margin=" << p.position_margin
-            << ", max_joint_speed=" << p.max_joint_speed
-            << ", damping=DampingParams(singular_value_threshold="
-            << p.damping.singular_value_threshold << ", max_damping=" << p.damping.max_damping
-            << "), limit_avoidance_gain=" << p.limit_avoidance_gain
-            << ", limit_avoidance_exponent=" << p.limit_avoidance_exponent << ")";
-        return out.str();
-      });
+      .def_readwrite("limit_avoidance_exponent", &VelocityCommandParams::limit_avoidance_exponent);
 
   py::class_<VelocityCommand>(m, "VelocityCommand",
                               "A joint velocity command and how the limits shaped it.")

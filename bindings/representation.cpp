@@ -4,7 +4,6 @@
 
 #include <spectral_vs/representation/cloud_io.hpp>
 #include <spectral_vs/representation/egi.hpp>
-#include <spectral_vs/representation/organized.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
 
@@ -180,29 +179,6 @@ drop_non_finite : bool
   m.def("voxel_downsample", &voxel_downsample, py::arg("cloud"), py::arg("voxel_size"),
         py::call_guard<py::gil_scoped_release>(),
         "Replace the points of each voxel_size cube (metres) by their centroid; normals averaged.");
-
-  m.def(
-      "organized_cloud",
-      [](const py::handle& depth, double fx, double fy, double cx, double cy, int normal_step,
-         int window, double max_depth_jump, int stride) {
-        auto array = py::array::ensure(depth);
-        if (!array || array.dtype().kind() != 'f' || array.ndim() != 2) {
-          throw py::value_error("depth must be a 2-D array of floats (height, width), metres");
-        }
-        auto doubles =
-            py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(array);
-        const Eigen::Map<const DepthImage> image(doubles.data(), doubles.shape(0),
-                                                 doubles.shape(1));
-        const PinholeIntrinsics intrinsics{fx, fy, cx, cy};
-        const OrganizedNormalParams params{normal_step, window, max_depth_jump, stride};
-        py::gil_scoped_release release;
-        return organized_cloud(image, intrinsics, params);
-      },
-      py::arg("depth"), py::arg("fx"), py::arg("fy"), py::arg("cx"), py::arg("cy"),
-      py::arg("normal_step") = 2, py::arg("window") = 5, py::arg("max_depth_jump") = 0.05,
-      py::arg("stride") = 1,
-      "Points and unit normals (toward the camera) of a planar depth image (metres, NaN = no "
-      "return), camera frame; every stride-th pixel with a reliable normal, row-major.");
 
   m.def(
       "estimate_normals",

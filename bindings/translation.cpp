@@ -50,6 +50,16 @@ VoxelGrid to_grid(const py::handle& object, const char* argument) {
   return grid;
 }
 
+void warn_tuple_unpacking() {
+  if (PyErr_WarnEx(PyExc_DeprecationWarning,
+                   "phase_correlation() returns a TranslationEstimate: unpacking or indexing it "
+                   "as the tuple (shift in voxels, peak) is deprecated and will be removed in "
+                   "0.3; use .shift (metres), .shift_voxels or .peak",
+                   2) != 0) {
+    throw py::error_already_set();
+  }
+}
+
 PhaseCorrelationParams make_params(bool subvoxel, double band, int threads,
                                    std::size_t max_voxels) {
   PhaseCorrelationParams params;
@@ -63,17 +73,45 @@ PhaseCorrelationParams make_params(bool subvoxel, double band, int threads,
 }  // namespace
 
 void define_translation(py::module_& m) {
-  py::class_<TranslationEstimate>(
-      m, "TranslationEstimate",
-      "Shift of a moving grid onto a target: target(x) ~ moving(x - shift).")
+  py::class_<TranslationEstimate>(m, "TranslationEstimate", R"doc(
+Shift of a moving grid onto a target: target(x) ~ moving(x - shift).
+
+Attributes
+----------
+shift : ndarray (3,)
+    Refined shift, metres (shift_voxels times the grid's resolution).
+shift_voxels : ndarray (3,)
+    Refined shift, voxels.
+peak_voxels : ndarray (3,) of int
+    Integer correlation peak, voxels.
+peak : float
+    Normalised peak height in [0, 1]: 1 for exact shifts of one grid, near 0 for no match.
+)doc")
+      .def_readonly("shift", &TranslationEstimate::shift, "Refined shift, metres.")
       .def_readonly("shift_voxels", &TranslationEstimate::shift_voxels, "Refined shift, voxels.")
       .def_readonly("peak_voxels", &TranslationEstimate::peak_voxels,
                     "Integer correlation peak, voxels.")
-      .def_readonly("shift", &TranslationEstimate::shift, "Refined shift, metres.")
       .def_readonly("peak", &TranslationEstimate::peak, "Normalised peak height in [0, 1].")
+      // phase_correlation() returned the tuple (shift in voxels, peak) before it returned
+      // this: unpacking and indexing still give that tuple, with a DeprecationWarning.
+      .def("__iter__",
+           [](const TranslationEstimate& e) {
+             warn_tuple_unpacking();
+             return py::iter(py::make_tuple(e.shift_voxels, e.peak));
+           })
+      .def(
+          "__getitem__",
+          [](const TranslationEstimate& e, py::ssize_t i) -> py::object {
+            warn_tuple_unpacking();
+            return py::make_tuple(e.shift_voxels, e.peak)[py::int_(i)];
+          },
+          py::arg("index"))
       .def("__repr__", [](const TranslationEstimate& e) {
         std::ostringstream out;
-        out << "TranslationEstimate(shift_voxels=[" << e.shift_voxels.transpose()
+        out << "TranslationEstimate(shift=[" << e.shift.x() << ", " << e.shift.y() << ", "
+            << e.shift.z() << "], shift_voxels=[" << e.shift_voxels.x() << ", "
+            << e.shift_voxels.y() << ", " << e.shift_voxels.z() << "], peak_voxels=["
+            << e.peak_voxels.x() << ", " << e.peak_voxels.y() << ", " << e.peak_voxels.z()
             << "], peak=" << e.peak << ")";
         return out.str();
       });
@@ -125,15 +163,17 @@ max_voxels : int
           py::gil_scoped_release release;
           estimate = phase_correlation(a, b, make_params(subvoxel, band, 1, max_voxels));
         }
-        return py::make_tuple(estimate.shift_voxels, estimate.peak);
+        return estimate;
       },
       py::arg("grid_a"), py::arg("grid_b"), py::arg("subvoxel") = true,
       py::arg("subvoxel_band") = 0.25, py::arg("max_voxels") = GridLimits{}.max_voxels, R"doc(
-Shift s in voxels such that grid_b(x) ~ grid_a(x - s), and the peak height in [0, 1].
+The shift of grid_a onto grid_b, grid_b(x) ~ grid_a(x - shift), as a TranslationEstimate:
+``shift`` in metres, ``shift_voxels``, ``peak_voxels`` and the peak height in [0, 1].
 
-Grids are VoxelGrids on the same spec or 3-D arrays of the same shape. Only shifts
-for which the occupied parts overlap are searched. Grids over ``max_voxels`` voxels are
-refused before the transforms are allocated.
+Grids are VoxelGrids on the same spec or 3-D arrays of the same shape (taken as unit
+voxels at the origin: there ``shift`` equals ``shift_voxels``). Only shifts for which the
+occupied parts overlap are searched. Grids over ``max_voxels`` voxels are refused before
+the transforms are allocated.
 )doc");
 
   m.def(
@@ -141,8 +181,9 @@ refused before the transforms are allocated.
       [](const py::handle& moving, const py::handle& target, const Eigen::Vector3i& shift) {
         return translation_cost(to_grid(moving, "moving"), to_grid(target, "target"), shift);
       },
-      py::arg("moving"), py::arg("target"), py::arg("shift"),
-      "J_t of eq. (9): 0.5 * sum (target(x) - moving(x - shift))^2 for an integer shift.");
+      py::arg("moving"), py::arg("target"), py::arg("shift_voxels"),
+      "J_t of eq. (9): 0.5 * sum (target(x) - moving(x - shift))^2 for an integer shift in "
+      "voxels (TranslationEstimate.peak_voxels).");
 }
 
 }  // namespace spectral_vs::python

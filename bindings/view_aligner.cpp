@@ -1,5 +1,6 @@
 // Bindings of align_views: two views of one scene registered globally.
 #include "conversions.hpp"
+#include "settings.hpp"
 
 #include <spectral_vs/alignment/view_aligner.hpp>
 
@@ -14,7 +15,8 @@ namespace {
 const char* kViewAlignParamsDoc = R"doc(
 Settings of ``align_views``; every length 0 by default: derived from the views.
 
-Takes its fields as keyword arguments: ``ViewAlignParams(hypotheses=24, threads=2)``.
+Takes its fields as keyword arguments, ``ViewAlignParams(hypotheses=24, threads=2)``; the
+repr shows every field.
 
 Attributes
 ----------
@@ -53,21 +55,6 @@ max_voxels : int
     Largest grid allowed, voxels.
 )doc";
 
-std::string repr(const ViewAlignParams& p) {
-  std::ostringstream out;
-  out << "ViewAlignParams(voxel_size=" << p.voxel_size
-      << ", search_voxel_size=" << p.search_voxel_size << ", voxels_across=" << p.voxels_across
-      << ", downsample=" << (p.downsample ? "True" : "False") << ", bandwidth=" << p.bandwidth
-      << ", hypotheses=" << p.hypotheses << ", refinements=" << p.refinements
-      << ", refinement_iterations=" << p.refinement_iterations
-      << ", icp_refinement=" << (p.icp_refinement ? "True" : "False") << ", current_viewpoint=["
-      << p.current_viewpoint.x() << ", " << p.current_viewpoint.y() << ", "
-      << p.current_viewpoint.z() << "], max_seconds=" << p.max_seconds << ", threads=" << p.threads
-      << ", occupancy='" << choice_name(p.occupancy, kOccupancies) << "', egi_method='"
-      << choice_name(p.egi_method, kEgiMethods) << "', max_voxels=" << p.limits.max_voxels << ")";
-  return out.str();
-}
-
 std::string repr(const ViewSupport& s) {
   std::ostringstream out;
   out << "ViewSupport(score=" << s.score << ", fitness=" << s.fitness << ", overlap=" << s.overlap
@@ -104,18 +91,7 @@ void define_view_aligner(py::module_& m) {
       "from their median, search voxel twice that.");
 
   py::class_<ViewAlignParams> params(m, "ViewAlignParams", kViewAlignParamsDoc);
-  params
-      .def(py::init([](const py::kwargs& fields) {
-        ViewAlignParams p;
-        py::object self = py::cast(&p, py::return_value_policy::reference);
-        for (const auto& [name, value] : fields) {
-          const std::string key = py::str(name);
-          if (!py::hasattr(self, key.c_str()) || key.rfind('_', 0) == 0)
-            throw py::type_error("ViewAlignParams has no setting '" + key + "'");
-          py::setattr(self, key.c_str(), value);
-        }
-        return p;
-      }))
+  define_settings(params)
       .def_readwrite("voxel_size", &ViewAlignParams::voxel_size)
       .def_readwrite("search_voxel_size", &ViewAlignParams::search_voxel_size)
       .def_readwrite("voxels_across", &ViewAlignParams::voxels_across)
@@ -150,9 +126,7 @@ void define_view_aligner(py::module_& m) {
           })
       .def_property(
           "max_voxels", [](const ViewAlignParams& p) { return p.limits.max_voxels; },
-          [](ViewAlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
-      .def("__copy__", [](const ViewAlignParams& p) { return ViewAlignParams(p); })
-      .def("__repr__", [](const ViewAlignParams& p) { return repr(p); });
+          [](ViewAlignParams& p, std::size_t v) { p.limits.max_voxels = v; });
 
   py::class_<ViewSupport>(m, "ViewSupport", R"doc(
 How well the current view supports a pose of the reference: the reference, moved by the

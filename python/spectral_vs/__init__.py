@@ -4,7 +4,8 @@ The representation (voxel grids, Extended Gaussian Images), the translation (3D 
 correlation) and rotation (EGI correlation over SO(3)) estimation, the aligner of
 Algorithm 1 and the camera kinematics of "3D Spectral Domain Registration-Based Visual
 Servoing" run in a compiled C++ core, ``spectral_vs._core``; this package re-exports
-them and adds :func:`align` and :func:`load_cloud`. The package is typed (PEP 561):
+them and adds :func:`align`, :func:`load_cloud`, :func:`pose_error` and the Open3D
+conversions :func:`from_open3d` and :func:`to_open3d`. The package is typed (PEP 561):
 ``_core.pyi`` describes the compiled module to type checkers.
 """
 
@@ -22,6 +23,7 @@ from spectral_vs._core import (
     DampingParams,
     GridSpec,
     Kinematics,
+    OrganizedCloud,
     PhaseCorrelation,
     PointCloud,
     RotationRefineResult,
@@ -34,6 +36,7 @@ from spectral_vs._core import (
     ViewScale,
     ViewSupport,
     VoxelGrid,
+    cloud_from_depth,
     damped_least_squares,
     egi,
     egi_cell,
@@ -64,6 +67,8 @@ from spectral_vs._core import (
     wigner_generators,
     wigner_real,
 )
+from spectral_vs.interop import from_open3d, to_open3d
+from spectral_vs.poses import PoseError, pose_error
 from spectral_vs.registration import align
 from spectral_vs.robot import RobotInterface
 from spectral_vs.servo import (
@@ -117,8 +122,10 @@ __all__ = [
     "DampingParams",
     "GridSpec",
     "Kinematics",
+    "OrganizedCloud",
     "PhaseCorrelation",
     "PointCloud",
+    "PoseError",
     "RobotInterface",
     "RotationRefineResult",
     "ServoLog",
@@ -137,17 +144,20 @@ __all__ = [
     "VoxelGrid",
     "align",
     "align_views",
+    "cloud_from_depth",
     "damped_least_squares",
     "egi",
     "egi_cell",
     "egi_coefficients",
     "estimate_normals",
     "fft_friendly_size",
+    "from_open3d",
     "load_cloud",
     "load_cloud_with_info",
     "load_organized",
     "make_grid_spec",
     "phase_correlation",
+    "pose_error",
     "real_spherical_harmonics",
     "refine_rotation",
     "rotation_cost",
@@ -161,6 +171,7 @@ __all__ = [
     "so3_correlation",
     "so3_search",
     "sphere_grid",
+    "to_open3d",
     "translation_cost",
     "view_scale",
     "view_support",

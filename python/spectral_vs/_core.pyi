@@ -15,7 +15,8 @@ or run ``pybind11-stubgen spectral_vs._core`` and copy the new lines here in thi
 """
 
 import os
-from typing import Any, Literal, TypeAlias, overload
+from collections.abc import Iterator
+from typing import Any, ClassVar, Literal, TypeAlias, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -68,17 +69,6 @@ def load_cloud_with_info(path: _Path) -> tuple[PointCloud, CloudFileInfo]: ...
 def load_organized(path: _Path) -> _Array: ...  # (height, width, 3), NaN: no return
 def save_cloud(path: _Path, cloud: PointCloud, encoding: str = "binary_compressed") -> None: ...
 def voxel_downsample(cloud: PointCloud, voxel_size: float) -> PointCloud: ...
-def organized_cloud(
-    depth: npt.ArrayLike,  # (height, width), metres; NaN = no return
-    fx: float,  # pixels
-    fy: float,
-    cx: float,
-    cy: float,
-    normal_step: int = 2,  # pixels
-    window: int = 5,  # pixels, odd
-    max_depth_jump: float = 0.05,  # fraction of the depth
-    stride: int = 1,
-) -> PointCloud: ...
 def estimate_normals(
     cloud: PointCloud,
     radius: float = 0.015,  # metres
@@ -135,19 +125,72 @@ def egi(
 def egi_cell(normal: npt.ArrayLike, bandwidth: int) -> _IntArray: ...  # (2,): (j, k)
 def sphere_grid(bandwidth: int) -> tuple[_Array, _Array]: ...  # theta_j (2B,), phi_k (2B,)
 
+# --- Depth images (bindings/depth_image.cpp) ------------------------------
+class OrganizedCloud:
+    """The cloud of a depth image pixel by pixel (of the strided image), camera frame."""
+
+    @property
+    def height(self) -> int: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def points(self) -> _Array: ...  # (height, width, 3) metres, NaN: invalid pixel
+    @property
+    def normals(self) -> _Array | None: ...  # (height, width, 3), NaN: no normal
+    @property
+    def has_normals(self) -> bool: ...
+    @property
+    def valid(self) -> npt.NDArray[np.bool_]: ...  # (height, width): the rows of valid_cloud()
+    def valid_cloud(self) -> PointCloud: ...
+
+@overload
+def cloud_from_depth(
+    depth: npt.ArrayLike,  # (height, width): uint16 sensor units or float32/64 metres
+    K: npt.ArrayLike,  # (3, 3) camera matrix, pixels
+    *,
+    depth_scale: float | None = None,  # units per metre; None: 1000 (uint16), 1 (float)
+    min_depth: float = 0.0,  # metres
+    max_depth: float = ...,  # metres, inf: no truncation
+    stride: int = 1,
+    organized: Literal[False] = False,
+    normals: bool = True,
+    normal_step: int = 2,  # pixels
+    window: int = 5,  # pixels, odd
+    max_depth_jump: float = 0.05,  # fraction of the depth
+) -> PointCloud: ...
+@overload
+def cloud_from_depth(
+    depth: npt.ArrayLike,
+    K: npt.ArrayLike,
+    *,
+    depth_scale: float | None = None,
+    min_depth: float = 0.0,
+    max_depth: float = ...,
+    stride: int = 1,
+    organized: Literal[True],
+    normals: bool = True,
+    normal_step: int = 2,
+    window: int = 5,
+    max_depth_jump: float = 0.05,
+) -> OrganizedCloud: ...
+
 # --- Translation (bindings/translation.cpp) ----------------------------------
 
 class TranslationEstimate:
     """Shift of a moving grid onto a target: target(x) ~ moving(x - shift)."""
 
     @property
-    def shift_voxels(self) -> _Array: ...  # (3,)
-    @property
-    def peak_voxels(self) -> _IntArray: ...  # (3,)
-    @property
     def shift(self) -> _Array: ...  # (3,), metres
     @property
-    def peak(self) -> float: ...
+    def shift_voxels(self) -> _Array: ...  # (3,), voxels
+    @property
+    def peak_voxels(self) -> _IntArray: ...  # (3,), voxels
+    @property
+    def peak(self) -> float: ...  # in [0, 1]
+    # Deprecated (removed in 0.3): unpacking or indexing gives the tuple (shift_voxels,
+    # peak) that phase_correlation() returned before 0.2, with a DeprecationWarning.
+    def __iter__(self) -> Iterator[Any]: ...
+    def __getitem__(self, index: int) -> Any: ...
 
 class PhaseCorrelation:
     """Phase correlation (eq. 7) against a cached target on a fixed grid."""
@@ -177,9 +220,11 @@ def phase_correlation(
     subvoxel: bool = True,
     subvoxel_band: float = 0.25,
     max_voxels: int = 134217728,
-) -> tuple[_Array, float]: ...  # shift (3,) in voxels, peak
+) -> TranslationEstimate: ...  # shift (metres), shift_voxels, peak_voxels, peak
 def translation_cost(
-    moving: VoxelGrid | npt.ArrayLike, target: VoxelGrid | npt.ArrayLike, shift: npt.ArrayLike
+    moving: VoxelGrid | npt.ArrayLike,
+    target: VoxelGrid | npt.ArrayLike,
+    shift_voxels: npt.ArrayLike,  # (3,) int, voxels
 ) -> float: ...
 
 # --- Rotation (bindings/rotation.cpp) ----------------------------------------
@@ -297,7 +342,38 @@ def _rotation_timings(bandwidth: int, repeats: int) -> dict[str, float]: ...
 class AlignParams:
     """Settings of spectral_vs.align; fields as in the C++ struct, with its units."""
 
-    def __init__(self) -> None: ...
+    def __init__(
+        self,
+        *,
+        voxel_size: float = ...,
+        bandwidth: int = ...,
+        translation_gain: float = ...,
+        rotation_gain: float = ...,
+        rotation_step: str = ...,
+        max_rotation_step: float = ...,
+        tolerance: float = ...,
+        max_iterations: int = ...,
+        refinement_iterations: int = ...,
+        max_seconds: float = ...,
+        initial_guess: npt.ArrayLike = ...,
+        global_search: bool = ...,
+        hypotheses: int = ...,
+        refinements: int = ...,
+        search_voxel_size: float = ...,
+        window_margin: float = ...,
+        max_translation: float = ...,
+        scene_viewpoint: npt.ArrayLike | None = ...,
+        suppress_support_plane: bool = ...,
+        polish: bool = ...,
+        icp_refinement: bool = ...,
+        subvoxel: bool = ...,
+        occupancy: str = ...,
+        egi_method: str = ...,
+        threads: int = ...,
+        max_voxels: int = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
     def __copy__(self) -> AlignParams: ...
     def __deepcopy__(self, memo: dict[Any, Any]) -> AlignParams: ...
     voxel_size: float  # metres
@@ -456,8 +532,29 @@ def view_scale(
 class ViewAlignParams:
     """Settings of align_views; every length 0 by default: derived from the views."""
 
-    def __init__(self, **kwargs: Any) -> None: ...
+    def __init__(
+        self,
+        *,
+        voxel_size: float = ...,
+        search_voxel_size: float = ...,
+        voxels_across: float = ...,
+        downsample: bool = ...,
+        bandwidth: int = ...,
+        hypotheses: int = ...,
+        refinements: int = ...,
+        refinement_iterations: int = ...,
+        icp_refinement: bool = ...,
+        current_viewpoint: npt.ArrayLike = ...,
+        max_seconds: float = ...,
+        threads: int = ...,
+        occupancy: str = ...,
+        egi_method: str = ...,
+        max_voxels: int = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
     def __copy__(self) -> ViewAlignParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> ViewAlignParams: ...
     voxel_size: float  # metres; 0: derived
     search_voxel_size: float  # metres; 0: twice the voxel
     voxels_across: float
@@ -533,8 +630,15 @@ class DampingParams:
     """Damping of the least-squares pseudo-inverse."""
 
     def __init__(
-        self, singular_value_threshold: float = 0.05, max_damping: float = 0.05
+        self,
+        *,
+        singular_value_threshold: float = ...,
+        max_damping: float = ...,
     ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
+    def __copy__(self) -> DampingParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> DampingParams: ...
     singular_value_threshold: float
     max_damping: float
 
@@ -557,13 +661,16 @@ class VelocityCommandParams:
 
     def __init__(
         self,
-        dt: float = 0.05,  # s
-        position_margin: float = 0.01,  # rad (m)
-        max_joint_speed: float = ...,  # rad/s (m/s); infinite by default
+        *,
+        dt: float = ...,
+        position_margin: float = ...,
+        max_joint_speed: float = ...,
         damping: DampingParams = ...,
-        limit_avoidance_gain: float = 0.5,  # 1/s; 0 turns the null-space avoidance off
-        limit_avoidance_exponent: float = 3.0,  # >= 1; 1 is linear centring
+        limit_avoidance_gain: float = ...,
+        limit_avoidance_exponent: float = ...,
     ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
     def __copy__(self) -> VelocityCommandParams: ...
     def __deepcopy__(self, memo: dict[Any, Any]) -> VelocityCommandParams: ...
     dt: float

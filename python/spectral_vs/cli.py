@@ -15,6 +15,7 @@ from typing import Any, TextIO
 import numpy as np
 
 import spectral_vs as svs
+from spectral_vs.poses import pose_error
 from spectral_vs.registration import prepare
 
 DEFAULT_DATA = Path(os.environ.get("SPECTRAL_VS_DATA", "../shared/data"))
@@ -155,9 +156,9 @@ def _plotting(argument: str) -> Any:
 
 
 def _errors(T: np.ndarray, truth: np.ndarray, center: np.ndarray) -> tuple[float, float]:
-    from spectral_vs.plotting import pose_errors  # numpy only; matplotlib is not imported
-
-    return pose_errors(T, truth, center)
+    """(rotation in degrees, translation in mm): the order of the limits and the report."""
+    error = pose_error(T, truth, center=center)
+    return error.rotation_deg, error.translation_mm
 
 
 def _within(errors: tuple[float, float], limits: tuple[float, float]) -> bool:

@@ -9,11 +9,13 @@ display and leaves the caller's matplotlib backend alone.
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Any
 
 import numpy as np
 
 from spectral_vs._core import AlignParams, AlignResult, PointCloud
+from spectral_vs.poses import pose_error
 
 _SCENE_COLOR = "0.45"
 _INITIAL_COLOR = "tab:red"
@@ -39,31 +41,21 @@ def _new_figure(width: float, height: float) -> Any:
 def pose_errors(
     T_estimate: np.ndarray, T_true: np.ndarray, center: np.ndarray | None = None
 ) -> tuple[float, float]:
-    """Rotation and translation error of an estimated pose against the true one.
+    """Deprecated (removed in 0.3): ``(rotation_deg, translation_mm)`` of an estimated pose.
 
-    Parameters
-    ----------
-    T_estimate, T_true : ndarray (4, 4)
-        Estimated and true ``T_scene_model``.
-    center : ndarray (3,), optional
-        Point of the model, in model coordinates, at which the translation error is
-        measured (e.g. the model's centroid); defaults to the model's origin, which gives
-        the distance between the two translation vectors.
-
-    Returns
-    -------
-    rotation_error : float
-        Angle of ``R_estimate^T R_true``, degrees.
-    translation_error : float
-        Distance between ``center`` moved by either transform, millimetres.
+    Use :func:`spectral_vs.pose_error`, which returns ``(translation_m, rotation_rad)``
+    with ``.rotation_deg`` and ``.translation_mm``: this is
+    ``e = pose_error(T_estimate, T_true, center=center); (e.rotation_deg, e.translation_mm)``.
     """
-    T_estimate = np.asarray(T_estimate, dtype=float)
-    T_true = np.asarray(T_true, dtype=float)
-    cosine = (np.trace(T_estimate[:3, :3].T @ T_true[:3, :3]) - 1.0) / 2.0
-    rotation_error = float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
-    point = np.zeros(3) if center is None else np.asarray(center, dtype=float)
-    offset = T_estimate[:3, :3] @ point + T_estimate[:3, 3] - T_true[:3, :3] @ point - T_true[:3, 3]
-    return rotation_error, float(1000.0 * np.linalg.norm(offset))
+    warnings.warn(
+        "spectral_vs.plotting.pose_errors is deprecated and will be removed in 0.3: use "
+        "spectral_vs.pose_error(T_estimate, T_true, center=center), which returns "
+        "(translation_m, rotation_rad) with .rotation_deg and .translation_mm",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    error = pose_error(T_estimate, T_true, center=center)
+    return error.rotation_deg, error.translation_mm
 
 
 def _set_scale(axis: Any, values: np.ndarray, from_zero: bool = False) -> None:
@@ -122,7 +114,8 @@ def plot_convergence(
         True ``T_scene_model``; adds the rotation error (degrees) and translation error
         (millimetres) of every iteration.
     center : ndarray (3,), optional
-        Model point at which the translation error is measured (see :func:`pose_errors`).
+        Model point at which the translation error is measured (see
+        :func:`spectral_vs.pose_error`).
     initial_T : ndarray (4, 4), optional
         ``T_scene_model`` the model started from (identity when omitted); its error is
         drawn at iteration 0, before the global search and the first update.
@@ -181,7 +174,13 @@ def plot_convergence(
     if ground_truth is not None:
         start = np.eye(4) if initial_T is None else np.asarray(initial_T, dtype=float)
         poses = [start] + [np.asarray(s.T_scene_model) for s in history]
-        errors = np.array([pose_errors(T, ground_truth, center) for T in poses], dtype=float)
+        errors = np.array(
+            [
+                (e.rotation_deg, e.translation_mm)
+                for e in (pose_error(T, ground_truth, center=center) for T in poses)
+            ],
+            dtype=float,
+        )
         steps = np.arange(len(poses))
         rotation_line = last.plot(
             steps, errors[:, 0], "o-", color="tab:purple", markersize=4, label="rotation (left)"

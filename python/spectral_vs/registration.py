@@ -17,18 +17,21 @@ from spectral_vs._core import (
     estimate_normals,
     voxel_downsample,
 )
+from spectral_vs.interop import from_open3d, is_open3d_cloud
 
 CloudLike = PointCloud | np.ndarray
 
 
 def as_cloud(cloud: CloudLike, argument: str) -> PointCloud:
-    """A :class:`PointCloud` from a cloud or an (N, 3) / (N, 6) array (points, normals).
+    """A :class:`PointCloud` from a cloud, an Open3D cloud or an (N, 3) / (N, 6) array
+    (points, normals).
 
     Parameters
     ----------
-    cloud : PointCloud or ndarray
-        Returned as is, or an (N, 3) array of points or (N, 6) array of points and
-        normals, metres.
+    cloud : PointCloud, open3d.geometry.PointCloud or ndarray
+        Returned as is; an Open3D cloud's points and normals (:func:`spectral_vs.from_open3d`,
+        non-finite points dropped); or an (N, 3) array of points or (N, 6) array of points
+        and normals, metres.
     argument : str
         Name of the argument, for the error message.
 
@@ -43,10 +46,13 @@ def as_cloud(cloud: CloudLike, argument: str) -> PointCloud:
     """
     if isinstance(cloud, PointCloud):
         return cloud
+    if is_open3d_cloud(cloud):
+        return from_open3d(cloud)
     array = np.asarray(cloud)
     if array.ndim != 2 or array.shape[1] not in (3, 6):
         raise ValueError(
-            f"{argument} must be a PointCloud or an (N, 3) / (N, 6) array, got shape {array.shape}"
+            f"{argument} must be a PointCloud or an (N, 3) / (N, 6) array (or an "
+            f"open3d.geometry.PointCloud), got shape {array.shape}"
         )
     if array.shape[1] == 6:
         return PointCloud(array[:, :3], array[:, 3:])
@@ -155,8 +161,9 @@ def align(
 
     Parameters
     ----------
-    model, scene : PointCloud or ndarray
-        Clouds in metres, as :class:`PointCloud` or (N, 3) / (N, 6) arrays (points, normals).
+    model, scene : PointCloud, open3d.geometry.PointCloud or ndarray
+        Clouds in metres, as :class:`PointCloud`, Open3D clouds (their points and normals)
+        or (N, 3) / (N, 6) arrays (points, normals).
         Missing normals are estimated (radius 2 x voxel_size, oriented toward ``viewpoint``,
         the sensor origin of a scan).
     params : AlignParams, optional

@@ -60,6 +60,7 @@ from spectral_vs._core import (
     voxel_downsample,
 )
 from spectral_vs._core import align_views as _align_views
+from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
 from spectral_vs.registration import CloudLike, as_cloud, prepare
 from spectral_vs.robot import RobotInterface
 from spectral_vs.sensor_faults import frame_fingerprint, near_occluders
@@ -102,57 +103,6 @@ _CLOCK_TOLERANCE = 1e-9
 #: Reference points kept for the occluder test (a strided subsample of the reference as
 #: captured): its bins (2.9 degrees) then hold about 10 points each at 160 x 120.
 _OCCLUSION_REFERENCE_POINTS = 5000
-
-
-# --------------------------------------------------------------------------- rotations
-
-
-def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """``theta u`` of a rotation matrix: axis times angle, rad, angle in [0, pi].
-
-    Parameters
-    ----------
-    R : ndarray, shape (3, 3)
-        A rotation matrix.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        The rotation vector; its norm is the angle.
-    """
-    R = np.asarray(R, dtype=float)
-    cos_angle = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    angle = math.acos(cos_angle)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if angle < 1e-6:
-        return w / 2.0  # sin(angle) ~ angle
-    if angle < math.pi - 1e-3:
-        return w * (angle / (2.0 * math.sin(angle)))
-    # Near pi the skew part vanishes: the axis is the dominant column of R + I.
-    B = (R + np.eye(3)) / 2.0
-    k = int(np.argmax(np.diag(B)))
-    axis = B[:, k] / math.sqrt(max(B[k, k], 1e-12))
-    if w @ axis < 0:
-        axis = -axis
-    return axis / np.linalg.norm(axis) * angle
-
-
-def rotation_matrix(rotvec: np.ndarray) -> np.ndarray:
-    """The rotation ``exp(hat(rotvec))`` (Rodrigues' formula)."""
-    rotvec = np.asarray(rotvec, dtype=float)
-    angle = float(np.linalg.norm(rotvec))
-    K = np.array(
-        [[0.0, -rotvec[2], rotvec[1]], [rotvec[2], 0.0, -rotvec[0]], [-rotvec[1], rotvec[0], 0.0]]
-    )
-    if angle < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + math.sin(angle) / angle * K + (1.0 - math.cos(angle)) / angle**2 * (K @ K)
-
-
-def pose_error(T: np.ndarray) -> tuple[float, float]:
-    """Translation (m) and rotation angle (rad) of a relative pose ``T`` (4 x 4)."""
-    T = np.asarray(T, dtype=float)
-    return float(np.linalg.norm(T[:3, 3])), float(np.linalg.norm(rotation_vector(T[:3, :3])))
 
 
 # --------------------------------------------------------------------------- settings

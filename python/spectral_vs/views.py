@@ -46,10 +46,10 @@ def align_views(
 
     Parameters
     ----------
-    reference, current : PointCloud or ndarray
-        The two views, metres, as :class:`PointCloud` or (N, 3) / (N, 6) arrays (points,
-        normals). Missing normals are estimated (20 nearest neighbours) and turned toward
-        the view's sensor.
+    reference, current : PointCloud, open3d.geometry.PointCloud or ndarray
+        The two views, metres, as :class:`PointCloud`, Open3D clouds or (N, 3) / (N, 6)
+        arrays (points, normals). Missing normals are estimated (20 nearest neighbours)
+        and turned toward the view's sensor.
     params : ViewAlignParams, optional
         Settings; defaults to ``ViewAlignParams()`` (every length derived from the views).
     current_viewpoint : array_like (3,)

@@ -193,7 +193,7 @@ def rough_depth(rng: np.random.Generator) -> np.ndarray:
 
 @pytest.mark.parametrize("stride", [1, 2, 3])
 def test_depth_to_cloud_is_the_numpy_reference(stride):
-    # The core's organized_cloud against back_project + organized_normals in float64,
+    # The core's cloud_from_depth against back_project + organized_normals in float64,
     # the same pixels and the same values.
     depth = rough_depth(np.random.default_rng(stride))
     params = sim.NormalParams(stride=stride)
@@ -213,18 +213,12 @@ def test_depth_to_cloud_is_the_numpy_reference(stride):
     np.testing.assert_allclose(cloud.normals, single, rtol=0, atol=1e-4)
 
 
-def test_organized_cloud_refuses_bad_arguments():
-    depth = np.full((20, 30), 1.0)
-    with pytest.raises(ValueError, match="2-D"):
-        svs._core.organized_cloud(np.ones(5), 100.0, 100.0, 10.0, 10.0)
-    with pytest.raises(ValueError, match="floats"):
-        svs._core.organized_cloud(np.ones((5, 5), dtype=int), 100.0, 100.0, 10.0, 10.0)
-    with pytest.raises(ValueError, match="fx"):
-        svs._core.organized_cloud(depth, 0.0, 100.0, 10.0, 10.0)
-    with pytest.raises(ValueError, match="window"):
-        svs._core.organized_cloud(depth, 100.0, 100.0, 10.0, 10.0, window=2)
+def test_depth_to_cloud_refuses_a_depth_of_another_size_and_sees_nothing_as_empty():
     with pytest.raises(ValueError, match="shape"):
-        sim.depth_to_cloud(depth, SMALL)
+        sim.depth_to_cloud(np.full((20, 30), 1.0), SMALL)
+    # A frame with no return at all is an empty cloud (the servo holds on it), not an error.
+    nothing = np.full((SMALL.height, SMALL.width), np.nan)
+    assert len(sim.depth_to_cloud(nothing, SMALL)) == 0
 
 
 # --- Robot ---------------------------------------------------------------------------------

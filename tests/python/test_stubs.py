@@ -234,6 +234,15 @@ def signature_cases() -> list[tuple[str, Any, list[ast.FunctionDef]]]:
     return cases
 
 
+def settable_fields(cls: type) -> list[str]:
+    """The properties with a setter of a bound class, in the order they were bound."""
+    return [
+        name
+        for name, value in vars(cls).items()
+        if not name.startswith("_") and isinstance(value, property) and value.fset is not None
+    ]
+
+
 def pretty(parameters: list[Parameter]) -> str:
     out = []
     for i, (name, kind, default) in enumerate(parameters):
@@ -261,6 +270,15 @@ def test_stub_signatures_match_module(
     stubs = [stub_signature(node) for node in defs]
     if is_method and not static:
         stubs = [signature[1:] for signature in stubs]
+
+    if actual == [[("**kwargs", "positional", NO_DEFAULT)]] and qualname.endswith(".__init__"):
+        # A settings struct (bindings/settings.hpp) takes its fields as keywords: the stub
+        # spells them out, keyword-only, in the order of the bound settable properties.
+        fields = settable_fields(getattr(_core, qualname.split(".")[0]))
+        assert len(stubs) == 1 and stubs[0] == [(f, "keyword", NOT_LITERAL) for f in fields], (
+            f"{qualname}: stub {pretty(stubs[0])} but the settings are {fields}"
+        )
+        return
 
     if len(defs) == 1:
         # Names, order, keyword-only markers and literal defaults must all agree.

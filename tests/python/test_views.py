@@ -88,7 +88,7 @@ def test_settings_take_keywords_and_show_every_field():
     for name in ("voxel_size", "hypotheses", "refinements", "current_viewpoint", "threads"):
         assert name in text
     assert copy.copy(params).hypotheses == 24
-    with pytest.raises(TypeError, match="no setting 'hypothesis'"):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'hypothesis'"):
         svs.ViewAlignParams(hypothesis=3)
 
 

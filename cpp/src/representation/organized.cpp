@@ -1,20 +1,22 @@
 #include <spectral_vs/representation/organized.hpp>
 
 #include "common/checks.hpp"
+#include "representation/organized_detail.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 namespace spectral_vs {
 
 using detail::fail;
 
-namespace {
+namespace detail {
 
-void check(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params) {
-  detail::require_positive_finite(intrinsics.fx, "fx");
-  detail::require_positive_finite(intrinsics.fy, "fy");
+void check_organized(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params) {
+  require_positive_finite(intrinsics.fx, "fx");
+  require_positive_finite(intrinsics.fy, "fy");
   if (!std::isfinite(intrinsics.cx) || !std::isfinite(intrinsics.cy)) {
     fail("the principal point (cx, cy) must be finite, got (", intrinsics.cx, ", ", intrinsics.cy,
          ")");
@@ -27,33 +29,33 @@ void check(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& par
   if (params.stride < 1) fail("stride must be >= 1, got ", params.stride);
 }
 
+namespace {
+
 // Scratch buffers kept per thread: a servo converts one image of the same size per step.
 struct Scratch {
   std::vector<double> cross[3];    // per interior pixel, zero where unreliable
   std::vector<double> columns[3];  // per kept interior row: sums over the window's rows
   std::vector<unsigned char> reliable;
-  std::vector<double> kept;  // per kept pixel: point, then normal
 };
 
 }  // namespace
 
-PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,
-                           const PinholeIntrinsics& intrinsics,
-                           const OrganizedNormalParams& params) {
-  check(intrinsics, params);
-  const int h = static_cast<int>(depth.rows()), w = static_cast<int>(depth.cols());
+void scan_depth(const double* d, int h, int w, const PinholeIntrinsics& intrinsics,
+                const OrganizedNormalParams& params, const ScanOutput& output,
+                std::vector<double>& out) {
+  out.clear();
   const int s = params.normal_step, r = params.window / 2, stride = params.stride;
-  if (h <= 2 * s || w <= 2 * s) return PointCloud(Points(0, 3), Points(0, 3));
+  // Normals need the whole stencil: the interior (rows and columns s .. size - s - 1).
+  const bool normals = output.normals && h > 2 * s && w > 2 * s;
+  if (output.normals && !normals && !output.every_pixel) return;  // no pixel has a normal
 
   // Back-projection factors of each column and row: x = d (u - cx) / fx, y = d (v - cy) / fy.
   std::vector<double> along_u(static_cast<std::size_t>(w)), along_v(static_cast<std::size_t>(h));
   for (int u = 0; u < w; ++u) along_u[std::size_t(u)] = (u - intrinsics.cx) / intrinsics.fx;
   for (int v = 0; v < h; ++v) along_v[std::size_t(v)] = (v - intrinsics.cy) / intrinsics.fy;
-  const double* d = depth.data();
   auto at = [&](int v, int u) { return d[std::size_t(v) * std::size_t(w) + std::size_t(u)]; };
 
-  // The interior (rows and columns s .. size - s - 1), where the whole stencil exists.
-  const int ih = h - 2 * s, iw = w - 2 * s;
+  const int ih = normals ? h - 2 * s : 0, iw = normals ? w - 2 * s : 0;
   const std::size_t interior = std::size_t(ih) * std::size_t(iw);
   thread_local Scratch per_thread;
   Scratch& scratch = per_thread;  // one look-up of the thread's buffers, not one per access
@@ -94,55 +96,95 @@ PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,
     }
   }
 
-  // Kept pixels: v, u multiples of the stride inside the interior.
-  const int first = (s + stride - 1) / stride * stride;  // the first multiple of the stride >= s
-  const int kept_rows = first < h - s ? (h - s - 1 - first) / stride + 1 : 0;
-  const int kept_columns = first < w - s ? (w - s - 1 - first) / stride + 1 : 0;
-  std::vector<double>& out = scratch.kept;
-  out.clear();
-  out.reserve(std::size_t(kept_rows) * std::size_t(kept_columns) * 6);
+  // The lattice: rows and columns multiples of the stride.
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::size_t lattice =
+      std::size_t((h + stride - 1) / stride) * std::size_t((w + stride - 1) / stride);
+  out.reserve(lattice * 6);
   // Column sums with r zeros on either side: the window's columns need no bounds test.
   for (auto& c : scratch.columns) c.assign(std::size_t(iw + 2 * r), 0.0);
   double* const columns[3] = {scratch.columns[0].data() + r, scratch.columns[1].data() + r,
                               scratch.columns[2].data() + r};
   const double* const crosses[3] = {cross_x, cross_y, cross_z};
-  for (int v = first; v < h - s; v += stride) {
+  for (int v = 0; v < h; v += stride) {
     const int i = v - s;
-    // Sums over the window's rows (zero outside the interior), for every interior column.
-    for (int c = 0; c < 3; ++c) {
-      double* column = columns[c];
-      std::fill(column, column + iw, 0.0);
-      for (int row = std::max(i - r, 0); row <= std::min(i + r, ih - 1); ++row) {
-        const double* line = crosses[c] + std::size_t(row) * std::size_t(iw);
-        for (int j = 0; j < iw; ++j) column[j] += line[j];
+    const bool interior_row = normals && v >= s && v < h - s;
+    if (output.normals && !interior_row && !output.every_pixel) continue;
+    if (interior_row) {
+      // Sums over the window's rows (zero outside the interior), for every interior column.
+      for (int c = 0; c < 3; ++c) {
+        double* column = columns[c];
+        std::fill(column, column + iw, 0.0);
+        for (int row = std::max(i - r, 0); row <= std::min(i + r, ih - 1); ++row) {
+          const double* line = crosses[c] + std::size_t(row) * std::size_t(iw);
+          for (int j = 0; j < iw; ++j) column[j] += line[j];
+        }
       }
     }
     const double yv = along_v[std::size_t(v)];
-    for (int u = first; u < w - s; u += stride) {
+    for (int u = 0; u < w; u += stride) {
+      const double z = at(v, u);
+      double n[3] = {nan, nan, nan};
+      bool has_normal = false;
       const int j = u - s;
-      if (!reliable[std::size_t(i) * std::size_t(iw) + std::size_t(j)]) continue;
-      double n[3];
-      for (int c = 0; c < 3; ++c) {
-        double sum = 0.0;
-        for (int dj = -r; dj <= r; ++dj) sum += columns[c][j + dj];
-        n[c] = sum;
+      if (interior_row && u >= s && u < w - s &&
+          reliable[std::size_t(i) * std::size_t(iw) + std::size_t(j)]) {
+        for (int c = 0; c < 3; ++c) {
+          double sum = 0.0;
+          for (int dj = -r; dj <= r; ++dj) sum += columns[c][j + dj];
+          n[c] = sum;
+        }
+        const double norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        has_normal = norm > 0.0;
+        if (has_normal) {
+          const double x = z * along_u[std::size_t(u)], y = z * yv;
+          // Toward the camera: n . (0 - p) > 0.
+          const double scale = (n[0] * x + n[1] * y + n[2] * z > 0.0 ? -1.0 : 1.0) / norm;
+          for (double& component : n) component *= scale;
+        } else {
+          n[0] = n[1] = n[2] = nan;
+        }
       }
-      const double norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      if (!(norm > 0.0)) continue;
-      const double z = at(v, u), x = z * along_u[std::size_t(u)], y = z * yv;
-      // Toward the camera: n . (0 - p) > 0.
-      const double scale = (n[0] * x + n[1] * y + n[2] * z > 0.0 ? -1.0 : 1.0) / norm;
-      out.insert(out.end(), {x, y, z, n[0] * scale, n[1] * scale, n[2] * scale});
+      if (!output.every_pixel && !(output.normals ? has_normal : std::isfinite(z))) continue;
+      const bool has_point = std::isfinite(z);
+      const double x = has_point ? z * along_u[std::size_t(u)] : nan;
+      const double y = has_point ? z * yv : nan;
+      out.insert(out.end(), {x, y, has_point ? z : nan, n[0], n[1], n[2]});
     }
   }
+}
+
+void split_rows(const std::vector<double>& rows, bool with_normals, Points& points,
+                Points& normals) {
   // Allocated at their size only now (a frame's cloud is megabytes).
-  const Eigen::Index kept = Eigen::Index(out.size() / 6);
-  Points points(kept, 3), normals(kept, 3);
+  const Eigen::Index kept = Eigen::Index(rows.size() / 6);
+  points.resize(kept, 3);
+  normals.resize(with_normals ? kept : 0, 3);
   for (Eigen::Index i = 0; i < kept; ++i) {
-    const double* row = out.data() + 6 * i;
+    const double* row = rows.data() + 6 * i;
     points.row(i) << row[0], row[1], row[2];
-    normals.row(i) << row[3], row[4], row[5];
+    if (with_normals) normals.row(i) << row[3], row[4], row[5];
   }
+}
+
+}  // namespace detail
+
+PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,
+                           const PinholeIntrinsics& intrinsics,
+                           const OrganizedNormalParams& params) {
+  detail::check_organized(intrinsics, params);
+  // The scan reads one row-major block: an Eigen::Ref with an outer stride is copied.
+  DepthImage copy;
+  const double* data = depth.data();
+  if (depth.outerStride() != depth.cols()) {
+    copy = depth;
+    data = copy.data();
+  }
+  thread_local std::vector<double> rows;
+  detail::scan_depth(data, int(depth.rows()), int(depth.cols()), intrinsics, params,
+                     {/*normals=*/true, /*every_pixel=*/false}, rows);
+  Points points, normals;
+  detail::split_rows(rows, true, points, normals);
   return PointCloud(std::move(points), std::move(normals));
 }
 

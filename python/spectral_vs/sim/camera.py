@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet
 
-from spectral_vs._core import PointCloud, organized_cloud
+from spectral_vs._core import PointCloud, cloud_from_depth
 
 #: Flip between the vision camera frame and PyBullet's OpenGL camera frame.
 OPENGL_FROM_VISION = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -318,9 +318,9 @@ def organized_normals(
     """Unit normals (H, W, 3) of organized points, oriented toward the camera origin;
     NaN where no reliable normal exists (see :class:`NormalParams`).
 
-    The NumPy reference of the core's ``organized_cloud`` (which :func:`depth_to_cloud`
-    uses). Computed per coordinate plane, in float32 by default (4x faster than
-    interleaved float64; the normals differ by about 1e-5 rad).
+    The NumPy reference of the core's normals (:func:`spectral_vs.cloud_from_depth`,
+    which :func:`depth_to_cloud` uses). Computed per coordinate plane, in float32 by
+    default (4x faster than interleaved float64; the normals differ by about 1e-5 rad).
 
     Parameters
     ----------
@@ -377,8 +377,11 @@ def depth_to_cloud(
     """The point cloud with normals of a planar depth image (metres, NaN = missing), in
     the camera frame; pixels without a point or a reliable normal are dropped.
 
-    Computed in the core (``organized_cloud``, double precision), the same as
-    :func:`back_project` and :func:`organized_normals` in float64 followed by the stride.
+    What a real camera's frame goes through: :func:`spectral_vs.cloud_from_depth` with the
+    camera matrix :meth:`CameraIntrinsics.matrix` (double precision, the same as
+    :func:`back_project` and :func:`organized_normals` in float64 followed by the stride).
+    A frame that saw nothing (every pixel missing) gives an empty cloud, which a servo
+    treats as a sensor outage, rather than ``cloud_from_depth``'s error.
 
     Parameters
     ----------
@@ -403,12 +406,11 @@ def depth_to_cloud(
     expected = (intrinsics.height, intrinsics.width)
     if depth.shape != expected:
         raise ValueError(f"depth must have shape {expected} (height, width), got {depth.shape}")
-    return organized_cloud(
+    if not np.any(np.isfinite(depth) & (depth > 0.0)):  # no valid pixel
+        return PointCloud(np.empty((0, 3)), np.empty((0, 3)))
+    return cloud_from_depth(
         depth,
-        intrinsics.fx,
-        intrinsics.fy,
-        intrinsics.cx,
-        intrinsics.cy,
+        intrinsics.matrix(),
         normal_step=params.normal_step,
         window=params.window,
         max_depth_jump=params.max_depth_jump,

@@ -1,4 +1,6 @@
-// Recovers a known shift through the installed library; exits non-zero on failure.
+// Recovers a known shift, and reads a sensor's depth frame, through the installed library;
+// exits non-zero on failure.
+#include <spectral_vs/representation/depth_image.hpp>
 #include <spectral_vs/translation/phase_correlation.hpp>
 
 #include <cstdio>
@@ -23,5 +25,16 @@ int main() {
   const double error = (estimate.shift - T.topRightCorner<3, 1>()).norm();
   std::printf("shift %.4f %.4f %.4f m, error %.2f mm\n", estimate.shift.x(), estimate.shift.y(),
               estimate.shift.z(), 1000.0 * error);
-  return error < 0.001 ? 0 : 1;
+  if (error >= 0.001) return 1;
+
+  // A wall 0.8 m in front of a Kinect-class camera, in millimetres.
+  Eigen::Matrix3d K;
+  K << 525.0, 0.0, 319.5, 0.0, 525.0, 239.5, 0.0, 0.0, 1.0;
+  const spectral_vs::RawDepthImage depth = spectral_vs::RawDepthImage::Constant(480, 640, 800);
+  const spectral_vs::PointCloud wall = spectral_vs::cloud_from_depth(depth, K);
+  std::printf("depth frame: %zu points at z = %.3f m, normal z %.3f\n", wall.size(),
+              wall.points()(0, 2), wall.normals()(0, 2));
+  return wall.size() == 476u * 636u && wall.points()(0, 2) == 0.8 && wall.normals()(0, 2) == -1.0
+             ? 0
+             : 1;
 }

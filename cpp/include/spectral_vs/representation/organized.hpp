@@ -2,7 +2,8 @@
 /// @file organized.hpp
 /// Points and normals from an organized depth image (a depth camera's planar depth map):
 /// the fast way from a sensor frame to the input of the representation, without a
-/// neighbour search.
+/// neighbour search. `cloud_from_depth` (depth_image.hpp) is the entry point for sensor
+/// images (raw units, depth range, organized output); this is its core on metres.
 
 #include <spectral_vs/representation/point_cloud.hpp>
 
@@ -44,6 +45,9 @@ struct OrganizedNormalParams {
 /// in row-major order, when they have a point and a reliable normal (which excludes a
 /// border of `normal_step` pixels). The normals of the kept pixels use every pixel
 /// around them, whatever the stride.
+/// The same as `cloud_from_depth` on a metric image without a depth range, except that a
+/// depth of 0 or below is not refused and an image without valid pixels gives an empty
+/// cloud.
 /// @throws std::invalid_argument for non-finite or non-positive focal lengths,
 ///         a non-finite principal point, or invalid params.
 PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,

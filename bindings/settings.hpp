@@ -1,0 +1,124 @@
+#pragma once
+// What every bound settings struct offers in Python, written once: construction from
+// keyword arguments (`AlignParams(voxel_size=0.01, threads=2)`), a repr that shows every
+// field, equality, copy and deepcopy. The fields are the struct's bound properties (its
+// def_readwrite and def_property), found on the class when called, in the order they were
+// bound: a field added to the binding is in the constructor and the repr with no other line.
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <string>
+#include <vector>
+
+namespace spectral_vs::python {
+
+namespace py = pybind11;
+
+namespace settings_detail {
+
+/// The settable properties of the bound class `type`, in the order they were bound.
+inline std::vector<std::string> field_names(const py::handle& type) {
+  const py::object property = py::module_::import("builtins").attr("property");
+  std::vector<std::string> names;
+  for (const auto& item : type.attr("__dict__").attr("items")()) {
+    const auto pair = item.cast<py::tuple>();
+    const std::string name = pair[0].cast<std::string>();
+    if (name.rfind('_', 0) == 0 || !py::isinstance(pair[1], property)) continue;
+    if (pair[1].attr("fset").is_none()) continue;  // read-only: not a setting
+    names.push_back(name);
+  }
+  return names;
+}
+
+inline std::string type_name(const py::handle& self) {
+  return py::str(py::type::of(self).attr("__name__")).cast<std::string>();
+}
+
+/// A field's value as Python source: arrays as (nested) lists, the rest as repr shows it.
+inline std::string value_repr(const py::handle& value) {
+  if (py::isinstance<py::array>(value)) return py::repr(value.attr("tolist")());
+  return py::repr(value);
+}
+
+/// Sets the keyword arguments on `self` (a bound settings object). TypeError for a name
+/// that is no field (with the closest field names) or a value of the wrong type.
+inline void set_fields(const py::object& self, const py::kwargs& fields) {
+  const std::string name = type_name(self);
+  const std::vector<std::string> names = field_names(py::type::of(self));
+  for (const auto& [key_handle, value] : fields) {
+    const std::string key = py::str(key_handle);
+    bool known = false;
+    for (const auto& field : names) known = known || field == key;
+    if (!known) {
+      py::list choices;
+      for (const auto& field : names) choices.append(field);
+      const py::list close =
+          py::module_::import("difflib").attr("get_close_matches")(key, choices, 3, 0.6);
+      std::string hint;
+      for (std::size_t i = 0; i < close.size(); ++i) {
+        hint += (i ? ", '" : " (did you mean '") + close[i].cast<std::string>() + "'";
+      }
+      if (!hint.empty()) hint += "?)";
+      throw py::type_error(name + "() got an unexpected keyword argument '" + key + "'" + hint);
+    }
+    try {
+      py::setattr(self, key.c_str(), value);
+    } catch (py::error_already_set& error) {
+      if (!error.matches(PyExc_TypeError)) throw;
+      const py::object current = self.attr(key.c_str());
+      const std::string expected =
+          py::isinstance<py::array>(current)
+              ? std::string("an array like ") + value_repr(current)
+              : std::string(py::str(py::type::of(current).attr("__name__")));
+      throw py::type_error(name + "." + key + " takes " + expected + ", got " +
+                           std::string(py::repr(value)) + " (" +
+                           std::string(py::str(py::type::of(value).attr("__name__"))) + ")");
+    }
+  }
+}
+
+}  // namespace settings_detail
+
+/// Gives the bound settings struct `cls` its keyword constructor (every field optional,
+/// defaults those of the C++ struct), `__repr__` (`Name(field=value, ...)`, every field,
+/// evaluable), `__eq__` (field by field), `__copy__` and `__deepcopy__`.
+template <typename Params, typename... Options>
+py::class_<Params, Options...>& define_settings(py::class_<Params, Options...>& cls) {
+  cls.def(py::init([](const py::kwargs& fields) {
+    Params params;
+    settings_detail::set_fields(py::cast(&params, py::return_value_policy::reference), fields);
+    return params;
+  }));
+  cls.def("__repr__", [](const py::object& self) {
+    std::string out = settings_detail::type_name(self) + "(";
+    const auto names = settings_detail::field_names(py::type::of(self));
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      out += (i ? ", " : "") + names[i] + "=" +
+             settings_detail::value_repr(self.attr(names[i].c_str()));
+    }
+    return out + ")";
+  });
+  cls.def(
+      "__eq__",
+      [](const py::object& self, const py::object& other) -> py::object {
+        if (!py::isinstance<Params>(other))
+          return py::reinterpret_borrow<py::object>(Py_NotImplemented);
+        const py::object array_equal = py::module_::import("numpy").attr("array_equal");
+        for (const auto& name : settings_detail::field_names(py::type::of(self))) {
+          const py::object a = self.attr(name.c_str()), b = other.attr(name.c_str());
+          const bool same = py::isinstance<py::array>(a) || py::isinstance<py::array>(b)
+                                ? array_equal(a, b).cast<bool>()
+                                : a.equal(b);
+          if (!same) return py::bool_(false);
+        }
+        return py::bool_(true);
+      },
+      py::arg("other"));
+  cls.def("__copy__", [](const Params& p) { return Params(p); });
+  cls.def(
+      "__deepcopy__", [](const Params& p, const py::dict&) { return Params(p); }, py::arg("memo"));
+  return cls;
+}
+
+}  // namespace spectral_vs::python
