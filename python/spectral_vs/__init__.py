@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 
 from spectral_vs._core import (
+    AlignAlternative,
     AlignIteration,
     AlignParams,
     AlignResult,
@@ -65,6 +66,7 @@ from spectral_vs._core import (
     wigner_real,
 )
 from spectral_vs.registration import align
+from spectral_vs.verification import CONFIDENCE_THRESHOLD, PoseVerification, verify_pose
 from spectral_vs.robot import RobotInterface
 from spectral_vs.servo import (
     ServoLog,
@@ -108,6 +110,8 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
 
 __all__ = [
+    "CONFIDENCE_THRESHOLD",
+    "AlignAlternative",
     "AlignIteration",
     "AlignParams",
     "AlignResult",
@@ -119,6 +123,7 @@ __all__ = [
     "Kinematics",
     "PhaseCorrelation",
     "PointCloud",
+    "PoseVerification",
     "RobotInterface",
     "RotationRefineResult",
     "ServoLog",
@@ -137,6 +142,7 @@ __all__ = [
     "VoxelGrid",
     "align",
     "align_views",
+    "verify_pose",
     "damped_least_squares",
     "egi",
     "egi_cell",
