@@ -350,12 +350,13 @@ def main() -> int:
     with_peers = not args.no_peers and peers_available()
     records: list[dict] = []
     args.partial.unlink(missing_ok=True)
+    started_at = report_lib.commit()  # the code that measured, whatever is committed later
     for family in families:
         n = 1 if args.quick else args.cases_per_cell or CASES_PER_CELL[family]
         angles = (90,) if args.quick else tuple(float(a) for a in args.angles.split(","))
         for spec in case_lib.case_specs([family], angles, n):
             case = case_lib.make_case(spec)
-            new = run_case(case, with_peers)
+            new = [r | {"commit": started_at} for r in run_case(case, with_peers)]
             records += new
             with args.partial.open("a") as partial:  # what a stopped run has measured so far
                 partial.writelines(json.dumps(report_lib.rounded(r)) + "\n" for r in new)
@@ -370,7 +371,7 @@ def main() -> int:
 
 def finish(records: list[dict]) -> None:
     results = {
-        "commit": report_lib.commit(),
+        "commit": ", ".join(sorted({r.get("commit", "unknown") for r in records})),
         "machine": report_lib.machine(),
         "library_threshold": svs.CONFIDENCE_THRESHOLD,
         "summary": summarize(records),
