@@ -325,6 +325,17 @@ def plot(records: list[dict]) -> None:
     report_lib.save_figure(fig, FIGURE)
 
 
+def specs_of(family: str, angles, n: int) -> list[case_lib.CaseSpec]:
+    """``n`` cases per angle, the family's objects taken in turn across the angles (so that
+    7 angles x 2 cases cover 7 objects twice; ``cases.case_specs`` restarts them per angle)."""
+    objects = case_lib.FAMILY_OBJECTS[family]
+    return [
+        case_lib.CaseSpec(family, objects[(a * n + i) % len(objects)], float(angle), i)
+        for a, angle in enumerate(angles)
+        for i in range(n)
+    ]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="1 case per family, writes nothing")
@@ -354,7 +365,7 @@ def main() -> int:
     for family in families:
         n = 1 if args.quick else args.cases_per_cell or CASES_PER_CELL[family]
         angles = (90,) if args.quick else tuple(float(a) for a in args.angles.split(","))
-        for spec in case_lib.case_specs([family], angles, n):
+        for spec in specs_of(family, angles, n):
             case = case_lib.make_case(spec)
             new = [r | {"commit": started_at} for r in run_case(case, with_peers)]
             records += new

@@ -310,7 +310,7 @@ confidence : float
                     "The inlier distance d: one voxel_size, metres.")
       .def_readonly("alternatives", &AlignResult::alternatives,
                     "Poses more than 5 degrees or 10 mm from this one (and from each other) "
-                    "whose confidence is within 0.1 of this one's, best first.")
+                    "whose confidence is within 0.05 of this one's, best first.")
       .def_readonly("ambiguous", &AlignResult::ambiguous,
                     "True when there is an alternative: the scene does not tell the pose "
                     "from another one.")

@@ -5,6 +5,7 @@
 
 #include "alignment/icp_refinement.hpp"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 
@@ -28,7 +29,42 @@ constexpr double kMinInlierShare = 0.5;
 struct Candidate {
   Transform T = Transform::Identity();
   PoseVerification verification;
+  bool turn = false;  // a turn about the flat axis: its rotation is kept (see below)
 };
+
+// Point-to-plane steps of the translation alone. A turn about a flat EGI axis is refined
+// so: a full ICP slides along the surface's free turn (a mug whose handle is hidden) and
+// would leave the turns tried every kAxisStep unevenly spread; the translation takes
+// up the turn of the model about its centroid rather than its axis.
+constexpr int kTranslationSteps = 10;
+
+Transform refine_translation(const PointCloud& model, const IcpScene& scene, Transform T,
+                             double max_distance, const std::optional<Eigen::Vector3d>& viewpoint) {
+  const Eigen::Index stride = std::max<Eigen::Index>(1, model.points().rows() / 1500);
+  for (int step = 0; step < kTranslationSteps; ++step) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    int pairs = 0;
+    for (Eigen::Index i = 0; i < model.points().rows(); i += stride) {
+      const Eigen::Vector3d p =
+          T.topLeftCorner<3, 3>() * model.points().row(i).transpose() + T.topRightCorner<3, 1>();
+      const Eigen::Vector3d n = T.topLeftCorner<3, 3>() * model.normals().row(i).transpose();
+      if (viewpoint && n.dot(*viewpoint - p) <= 0.0) continue;
+      const Eigen::Index j = scene.nearest(p, n, max_distance, 0.7071);
+      if (j < 0) continue;
+      const Eigen::Vector3d q = scene.cloud().points().row(j).transpose();
+      const Eigen::Vector3d m = scene.cloud().normals().row(j).transpose();
+      A += m * m.transpose();
+      b += m * m.dot(q - p);
+      ++pairs;
+    }
+    if (pairs < 6) break;
+    const Eigen::Vector3d shift = A.completeOrthogonalDecomposition().solve(b);
+    T.topRightCorner<3, 1>() += shift;
+    if (shift.norm() < 2e-5) break;
+  }
+  return T;
+}
 
 // T_scene_model composed with the turn R of the model about its centroid c.
 Transform turned(const Transform& T, const Eigen::Matrix3d& R, const Eigen::Vector3d& c) {
@@ -58,6 +94,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   const Transform& T = result.T_scene_model;
 
   std::vector<Transform> poses;
+  std::vector<char> turns;
   try {
     So3Correlation self(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
                         true);
@@ -69,25 +106,32 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
          so3_search(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
                     search)) {
       const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
-      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees)
+      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
         poses.push_back(turned(T, R, c));
+        turns.push_back(0);
+      }
     }
   } catch (const std::invalid_argument&) {
     // A uniform EGI (a sphere's): no rotation stands out.
   }
   if (sources.flat_axis) {
-    const int turns = static_cast<int>(std::lround(2.0 * M_PI / kAxisStep));
-    for (int k = 1; k < turns; ++k)
+    const int count = static_cast<int>(std::lround(2.0 * M_PI / kAxisStep));
+    for (int k = 1; k < count; ++k) {
       poses.push_back(turned(T, exp_so3(double(k) * kAxisStep * *sources.flat_axis), c));
+      turns.push_back(1);
+    }
   }
-  for (std::size_t h = 0; h < std::min(kHypotheses, sources.hypotheses.size()); ++h)
+  for (std::size_t h = 0; h < std::min(kHypotheses, sources.hypotheses.size()); ++h) {
     poses.push_back(sources.hypotheses[h]);
+    turns.push_back(0);
+  }
 
   // The likeliest by inliers first (cheap), then refined as the returned pose was.
   std::vector<Candidate> candidates;
-  for (const Transform& pose : poses) {
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    const Transform& pose = poses[k];
     if (!apart(pose, T, c)) continue;
-    Candidate candidate{pose, verifier.verify(model, pose)};
+    Candidate candidate{pose, verifier.verify(model, pose), turns[k] != 0};
     if (candidate.verification.inliers >= kMinInlierShare * result.inliers)
       candidates.push_back(candidate);
   }
@@ -99,6 +143,12 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   IcpSettings icp;
   icp.viewpoint = params.scene_viewpoint;
   for (Candidate& candidate : candidates) {
+    if (candidate.turn) {
+      candidate.T = refine_translation(model, verifier.grid(), candidate.T, params.voxel_size,
+                                       params.scene_viewpoint);
+      candidate.verification = verifier.verify(model, candidate.T);
+      continue;
+    }
     for (const double distance : {1.0, 0.4}) {
       icp.max_distance = distance * params.voxel_size;
       const IcpOutcome outcome = refine_point_to_plane(model, verifier.grid(), candidate.T, icp);

@@ -31,7 +31,10 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
 /// Rotation apart, degrees, and model centroid apart, metres: the success tolerances.
 inline constexpr double kApartDegrees = 5.0;
 inline constexpr double kApartMetres = 0.010;
-/// A pose within this much confidence of the returned one is an alternative.
-inline constexpr double kAlternativeMargin = 0.1;
+/// A pose within this much confidence of the returned one is an alternative. Measured
+/// on C-1 cases of the tuning objects: the half and quarter turns of the box and the brick
+/// score within 0.002 of the returned pose, the duck's 10-degree turns about its flat EGI
+/// axis 0.064 below it (0.1 flagged the duck ambiguous).
+inline constexpr double kAlternativeMargin = 0.05;
 
 }  // namespace spectral_vs::detail

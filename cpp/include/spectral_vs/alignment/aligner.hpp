@@ -187,7 +187,7 @@ struct AlignResult {
   double inlier_rmse = 0.0;
   double inlier_distance = 0.0;  ///< kInlierVoxels * voxel_size, metres.
   /// With global search: poses apart from this one by more than 5 degrees or 10 mm (and
-  /// from each other), whose confidence is within 0.1 of this one's, best first, at most
+  /// from each other), whose confidence is within 0.05 of this one's, best first, at most
   /// AlignParams::max_alternatives.
   std::vector<AlignAlternative> alternatives;
   /// True when there is an alternative: the scene does not tell the pose apart from
