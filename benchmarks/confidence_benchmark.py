@@ -104,7 +104,10 @@ def record_of(case: case_lib.Case, run: str, result, seconds: float, wrong: bool
     success = (not wrong) and rotation < SUCCESS_DEG and translation < SUCCESS_M
     reported = [result.T_scene_model] + [a.T_scene_model for a in result.alternatives]
     truth_reported = (not wrong) and any(
-        max(case_lib.pose_error(case, T)[0] / SUCCESS_DEG, case_lib.pose_error(case, T)[1] / SUCCESS_M)
+        max(
+            case_lib.pose_error(case, T)[0] / SUCCESS_DEG,
+            case_lib.pose_error(case, T)[1] / SUCCESS_M,
+        )
         < 1.0
         for T in reported
     )
@@ -131,8 +134,13 @@ def features(model, case: case_lib.Case, T: np.ndarray, viewpoint) -> dict:
     """The verification's counts at the returned pose, and at twice the voxel."""
     out = {}
     for key, voxel in (("", 0.008), ("coarse_", 0.016)):
-        v = svs.verify_pose(model, case.scene_cloud(), T, voxel_size=voxel, scene_viewpoint=viewpoint)
-        out |= {key + k: getattr(v, k) for k in ("visible", "tight", "seen_through", "hidden", "inliers")}
+        v = svs.verify_pose(
+            model, case.scene_cloud(), T, voxel_size=voxel, scene_viewpoint=viewpoint
+        )
+        out |= {
+            key + k: getattr(v, k)
+            for k in ("visible", "tight", "seen_through", "hidden", "inliers")
+        }
     out["model_points"] = len(model)
     return out
 
@@ -252,7 +260,7 @@ def write_report(results: dict) -> None:
     summary, records = results["summary"], results["records"]
     header = ["poses", "right / wrong", "AUC confidence", "AUC fitness",
               f"confidence > {svs.CONFIDENCE_THRESHOLD:g} (the library's): kept / rejected",
-              f"confidence > {summary['threshold']:.3f} (balanced on this run's tuning): kept / rejected",
+              f"confidence > {summary['threshold']:.3f} (balanced, tuning): kept / rejected",
               f"fitness > {summary['fitness_threshold']:.3f}: kept / rejected"]  # fmt: skip
     rows = []
     for name, g in summary["groups"].items():
@@ -290,7 +298,11 @@ def write_report(results: dict) -> None:
     for name, spec in case_lib.HELDOUT_OBJECTS.items():
         cells = [f"`{name}`", spec.symmetry.note]
         for family in case_lib.HELDOUT_FAMILIES:
-            rs = [r for r in held if r["family"] == family and r["run"] == "default" and r["object"] == name]
+            rs = [
+                r
+                for r in held
+                if r["family"] == family and r["run"] == "default" and r["object"] == name
+            ]
             cells.append(f"{sum(r['success'] for r in rs)} / {len(rs)}")
         per_object.append(cells)
     table += "\n\nOurs per object (successes / cases; symmetry group used in the error):\n\n"
@@ -307,7 +319,8 @@ def plot(records: list[dict]) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 4))
     for ax, (title, families) in zip(
-        axes, [("tuning families", case_lib.TUNING_FAMILIES), ("held-out", case_lib.HELDOUT_FAMILIES)],
+        axes,
+        [("tuning families", case_lib.TUNING_FAMILIES), ("held-out", case_lib.HELDOUT_FAMILIES)],
         strict=True,
     ):
         rows = [r for r in records if r["run"] in RUNS and r["family"] in families]

@@ -256,8 +256,8 @@ confidence : float
 
   m.def(
       "_verify_pose",
-      [](const PointCloud& model, const PointCloud& scene, const py::handle& T,
-         double voxel_size, std::optional<Eigen::Vector3d> viewpoint) {
+      [](const PointCloud& model, const PointCloud& scene, const py::handle& T, double voxel_size,
+         std::optional<Eigen::Vector3d> viewpoint) {
         const Transform T_scene_model = to_transform(T, "T_scene_model");
         VerifyParams params;
         params.voxel_size = voxel_size;
@@ -320,7 +320,8 @@ confidence : float
             << choice_name(r.stop_reason, kStopReasons) << "', iterations=" << r.iterations
             << ", fitness=" << r.fitness << ", correlation=" << r.correlation
             << ", confidence=" << r.confidence << ", inliers=" << r.inliers
-            << ", inlier_rmse=" << r.inlier_rmse << ", ambiguous=" << (r.ambiguous ? "True" : "False")
+            << ", inlier_rmse=" << r.inlier_rmse
+            << ", ambiguous=" << (r.ambiguous ? "True" : "False")
             << ", alternatives=" << r.alternatives.size() << ")";
         return out.str();
       });

@@ -66,7 +66,6 @@ from spectral_vs._core import (
     wigner_real,
 )
 from spectral_vs.registration import align
-from spectral_vs.verification import CONFIDENCE_THRESHOLD, PoseVerification, verify_pose
 from spectral_vs.robot import RobotInterface
 from spectral_vs.servo import (
     ServoLog,
@@ -76,6 +75,7 @@ from spectral_vs.servo import (
     SpectralServo,
     run_servo,
 )
+from spectral_vs.verification import CONFIDENCE_THRESHOLD, PoseVerification, verify_pose
 from spectral_vs.views import align_views
 
 __version__ = "0.1.0"
@@ -142,7 +142,6 @@ __all__ = [
     "VoxelGrid",
     "align",
     "align_views",
-    "verify_pose",
     "damped_least_squares",
     "egi",
     "egi_cell",
@@ -168,6 +167,7 @@ __all__ = [
     "so3_search",
     "sphere_grid",
     "translation_cost",
+    "verify_pose",
     "view_scale",
     "view_support",
     "voxel_downsample",

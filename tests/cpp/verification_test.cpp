@@ -35,8 +35,8 @@ const Eigen::Vector3d kUp(0.0, 0.0, 1.0);
 // distances 3, 6, 5 and 1 mm to their nearest scene points (inliers at d = 8 mm) and one
 // 300 mm off; point-to-plane within 4 mm and turned the same way: the first and third.
 TEST(VerifyPose, InliersRmseAndTightCountsMatchHandComputation) {
-  const PointCloud scene = cloud_of({{0.0, 0.0, 0.0}, {0.1, 0.0, 0.0}, {0.2, 0.0, 0.0}},
-                                    {kUp, kUp, kUp});
+  const PointCloud scene =
+      cloud_of({{0.0, 0.0, 0.0}, {0.1, 0.0, 0.0}, {0.2, 0.0, 0.0}}, {kUp, kUp, kUp});
   const PointCloud model = cloud_of(
       {{0.0, 0.0, 0.003}, {0.1, 0.0, 0.006}, {0.2, 0.005, 0.0}, {0.5, 0.0, 0.0}, {0.0, 0.0, 0.001}},
       {kUp, kUp, kUp, kUp, -kUp});
@@ -156,8 +156,8 @@ TEST(AlignAlternatives, ABoxReportsItsFourHalfTurnPoses) {
   for (const AlignAlternative& a : result.alternatives) reported.push_back(a.T_scene_model);
   // Each of the box's four equal poses is among the reported ones, within 5 degrees and
   // 10 mm (its centroid is the model origin).
-  const std::vector<Eigen::Vector3d> half_turns{Eigen::Vector3d::Zero(), {M_PI, 0.0, 0.0},
-                                                {0.0, M_PI, 0.0}, {0.0, 0.0, M_PI}};
+  const std::vector<Eigen::Vector3d> half_turns{
+      Eigen::Vector3d::Zero(), {M_PI, 0.0, 0.0}, {0.0, M_PI, 0.0}, {0.0, 0.0, M_PI}};
   for (const Eigen::Vector3d& axis : half_turns) {
     Transform S = Transform::Identity();
     S.topLeftCorner<3, 3>() = exp_so3(axis);
@@ -172,8 +172,8 @@ TEST(AlignAlternatives, ABoxReportsItsFourHalfTurnPoses) {
   for (const AlignAlternative& a : result.alternatives) {
     EXPECT_GE(a.confidence, result.confidence - 0.05);
     EXPECT_GT(a.rotation_apart * 180.0 / M_PI, 5.0);
-    EXPECT_NEAR(a.rotation_apart * 180.0 / M_PI, degrees_apart(a.T_scene_model, result.T_scene_model),
-                1e-6);
+    EXPECT_NEAR(a.rotation_apart * 180.0 / M_PI,
+                degrees_apart(a.T_scene_model, result.T_scene_model), 1e-6);
   }
 }
 

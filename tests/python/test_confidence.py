@@ -120,7 +120,8 @@ def reported(result) -> list[np.ndarray]:
 
 def truth_among(result, T_true: np.ndarray, center: np.ndarray) -> bool:
     return any(
-        r < 5.0 and t < 10 * MM for r, t in (exact_error(T_true, T, center) for T in reported(result))
+        r < 5.0 and t < 10 * MM
+        for r, t in (exact_error(T_true, T, center) for T in reported(result))
     )
 
 
@@ -155,7 +156,7 @@ def mug_without_its_handle() -> tuple[svs.PointCloud, svs.PointCloud, np.ndarray
     r = cases.renderer()
     r.reset()
     r.add_mesh(mesh.vertices, mesh.faces, np.eye(4))
-    depth, body_ids = r.render(T_world_camera, cases.intrinsics())
+    depth, _ = r.render(T_world_camera, cases.intrinsics())
     points, normals = cases._scan(depth, T_world_camera, rng)
     # The handle is hidden: no scanned point is within 5 mm of the handle's tip.
     assert np.min(np.linalg.norm(points - far, axis=1)) > 5 * MM

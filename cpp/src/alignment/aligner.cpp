@@ -5,8 +5,8 @@
 #include <spectral_vs/rotation/so3_search.hpp>
 
 #include "alignment/algorithm1.hpp"
-#include "alignment/alternatives.hpp"
 #include "alignment/align_detail.hpp"
+#include "alignment/alternatives.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
@@ -666,8 +666,9 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     SceneThenWindow source(problem, whole_scene, window);
     AlignResult result = run_algorithm1(problem, correlation, scene_coefficients, start, source,
                                         params.max_iterations);
-    detail::set_verification(result, detail::Verifier(scene, params.voxel_size, params.scene_viewpoint)
-                                          .verify(model, result.T_scene_model));
+    detail::set_verification(result,
+                             detail::Verifier(scene, params.voxel_size, params.scene_viewpoint)
+                                 .verify(model, result.T_scene_model));
     return result;
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
@@ -727,7 +728,8 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   detail::set_verification(best, verifier.verify(model, best.T_scene_model));
   if (!out_of_time) {
     detail::AlternativeSources sources{model_coefficients, params.bandwidth, axis, {}};
-    for (const Hypothesis& h : hypotheses) sources.hypotheses.push_back(moving.transform_of(h.pose));
+    for (const Hypothesis& h : hypotheses)
+      sources.hypotheses.push_back(moving.transform_of(h.pose));
     detail::find_alternatives(model, verifier, sources, params, best);
   }
   return best;

@@ -102,9 +102,8 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     search.candidates = kSelfCandidates;
     search.threads = params.threads;
     RotationRefineParams refine;
-    for (const RotationCandidate& candidate :
-         so3_search(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
-                    search)) {
+    for (const RotationCandidate& candidate : so3_search(
+             sources.model_coefficients, sources.model_coefficients, sources.bandwidth, search)) {
       const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
       if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
         poses.push_back(turned(T, R, c));
@@ -172,8 +171,8 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     alternative.confidence = candidate.verification.confidence;
     alternative.inliers = candidate.verification.inliers;
     alternative.inlier_rmse = candidate.verification.inlier_rmse;
-    alternative.rotation_apart = rotation_distance(candidate.T.topLeftCorner<3, 3>(),
-                                                   T.topLeftCorner<3, 3>());
+    alternative.rotation_apart =
+        rotation_distance(candidate.T.topLeftCorner<3, 3>(), T.topLeftCorner<3, 3>());
     const Eigen::Vector4d h(c.x(), c.y(), c.z(), 1.0);
     alternative.translation_apart = ((candidate.T - T) * h).head<3>().norm();
     result.alternatives.push_back(alternative);

@@ -70,9 +70,8 @@ PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) c
     // Point to plane: two samplings of one surface are half a sample spacing apart along
     // it, not across it.
     const Eigen::Index agreeing = grid_.nearest(p, normal, margin, kTightCosine);
-    if (agreeing >= 0 &&
-        std::abs(scene_normals.row(agreeing).dot(p - scene_points.row(agreeing).transpose())) <=
-            tight)
+    if (agreeing >= 0 && std::abs(scene_normals.row(agreeing).dot(
+                             p - scene_points.row(agreeing).transpose())) <= tight)
       ++v.tight;
   }
   v.inlier_rmse = v.inliers ? std::sqrt(squared_sum / double(v.inliers)) : 0.0;
@@ -95,8 +94,7 @@ namespace spectral_vs {
 double confidence_of(const PoseVerification& v) {
   if (v.visible == 0) return 0.0;
   const double visible = double(v.visible);
-  return std::clamp(double(v.tight) / visible * (1.0 - double(v.seen_through) / visible), 0.0,
-                    1.0);
+  return std::clamp(double(v.tight) / visible * (1.0 - double(v.seen_through) / visible), 0.0, 1.0);
 }
 
 PoseVerification verify_pose(const PointCloud& model, const PointCloud& scene,

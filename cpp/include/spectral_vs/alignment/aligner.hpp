@@ -142,9 +142,9 @@ struct AlignIteration {
 /// object's, or one whose distinguishing part the view does not show).
 struct AlignAlternative {
   Transform T_scene_model = Transform::Identity();
-  double confidence = 0.0;   ///< As AlignResult::confidence, for this pose.
-  int inliers = 0;           ///< As AlignResult::inliers.
-  double inlier_rmse = 0.0;  ///< As AlignResult::inlier_rmse, metres.
+  double confidence = 0.0;         ///< As AlignResult::confidence, for this pose.
+  int inliers = 0;                 ///< As AlignResult::inliers.
+  double inlier_rmse = 0.0;        ///< As AlignResult::inlier_rmse, metres.
   double rotation_apart = 0.0;     ///< Rotation from the returned pose, radians.
   double translation_apart = 0.0;  ///< Model centroid from the returned pose's, metres.
 };
