@@ -759,7 +759,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--families",
-        default=",".join(case_lib.FAMILIES),
+        default=",".join(case_lib.TUNING_FAMILIES),
         help="comma-separated subset of " + ", ".join(case_lib.FAMILIES),
     )
     parser.add_argument(

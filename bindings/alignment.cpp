@@ -111,6 +111,9 @@ threads : int
 max_voxels : int
     Memory cap: any grid over this many voxels is refused with ``ValueError`` before it
     is allocated (default 2^27; the largest grids take about 28 bytes per voxel).
+max_alternatives : int
+    With global search: at most this many alternatives reported (``AlignResult.alternatives``),
+    in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
 )doc");
   define_settings(align_params)
       .def_readwrite("voxel_size", &AlignParams::voxel_size)
@@ -157,7 +160,8 @@ max_voxels : int
       .def_readwrite("threads", &AlignParams::threads)
       .def_property(
           "max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
-          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; });
+          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
+      .def_readwrite("max_alternatives", &AlignParams::max_alternatives);
 
   py::class_<AlignIteration>(m, "AlignIteration", "One iteration of Algorithm 1, after its update.")
       .def_readonly("translation_cost", &AlignIteration::translation_cost,
@@ -174,6 +178,88 @@ max_voxels : int
       .def_property_readonly("T_scene_model", [](const AlignIteration& i) {
         return Eigen::Matrix4d(i.T_scene_model);
       });
+
+  py::class_<AlignAlternative>(m, "AlignAlternative", R"doc(
+Another pose that the scene supports about as well as the returned one.
+
+Attributes: ``T_scene_model`` (4x4), ``confidence`` (as AlignResult.confidence), ``inliers``,
+``inlier_rmse`` (metres), ``rotation_apart`` (radians from the returned pose),
+``translation_apart`` (metres between the model centroids of the two poses).
+)doc")
+      .def_property_readonly(
+          "T_scene_model",
+          [](const AlignAlternative& a) { return Eigen::Matrix4d(a.T_scene_model); })
+      .def_readonly("confidence", &AlignAlternative::confidence)
+      .def_readonly("inliers", &AlignAlternative::inliers)
+      .def_readonly("inlier_rmse", &AlignAlternative::inlier_rmse, "Metres.")
+      .def_readonly("rotation_apart", &AlignAlternative::rotation_apart, "Radians.")
+      .def_readonly("translation_apart", &AlignAlternative::translation_apart, "Metres.")
+      .def("__repr__", [](const AlignAlternative& a) {
+        std::ostringstream out;
+        out << "AlignAlternative(confidence=" << a.confidence << ", inliers=" << a.inliers
+            << ", rotation_apart=" << a.rotation_apart
+            << ", translation_apart=" << a.translation_apart << ")";
+        return out.str();
+      });
+
+  py::class_<PoseVerification>(m, "PoseVerification", R"doc(
+The scene's support of one model pose (verify_pose); counts are over model points.
+
+Attributes
+----------
+inlier_distance : float
+    d = 1 voxel, metres.
+inliers : int
+    Model points whose nearest scene point is within d (Euclidean, normals ignored).
+inlier_rmse : float
+    Root mean square of those nearest distances over the inliers, metres (0 with none).
+inlier_fraction : float
+    inliers / model points (Open3D's ``fitness`` with max distance d).
+visible : int
+    Model points the sensor would see: facing the viewpoint, in view and not behind a
+    scene surface nearer than d (all points without a viewpoint).
+tight : int
+    Visible points within a quarter voxel of a scene point whose normal is within 45
+    degrees of theirs.
+seen_through : int
+    Visible points more than d in front of the scanned surface (0 without a viewpoint).
+hidden : int
+    Points facing the viewpoint, in view, behind a scene surface nearer by more than d.
+confidence : float
+    tight / visible * (1 - seen_through / visible), in [0, 1].
+)doc")
+      .def_readonly("inlier_distance", &PoseVerification::inlier_distance)
+      .def_readonly("inliers", &PoseVerification::inliers)
+      .def_readonly("inlier_rmse", &PoseVerification::inlier_rmse)
+      .def_readonly("inlier_fraction", &PoseVerification::inlier_fraction)
+      .def_readonly("visible", &PoseVerification::visible)
+      .def_readonly("tight", &PoseVerification::tight)
+      .def_readonly("seen_through", &PoseVerification::seen_through)
+      .def_readonly("hidden", &PoseVerification::hidden)
+      .def_readonly("confidence", &PoseVerification::confidence)
+      .def("__repr__", [](const PoseVerification& v) {
+        std::ostringstream out;
+        out << "PoseVerification(confidence=" << v.confidence << ", inliers=" << v.inliers
+            << ", inlier_rmse=" << v.inlier_rmse << ", visible=" << v.visible
+            << ", tight=" << v.tight << ", seen_through=" << v.seen_through << ")";
+        return out.str();
+      });
+
+  m.attr("CONFIDENCE_THRESHOLD") = kConfidenceThreshold;
+
+  m.def(
+      "_verify_pose",
+      [](const PointCloud& model, const PointCloud& scene, const py::handle& T, double voxel_size,
+         std::optional<Eigen::Vector3d> viewpoint) {
+        const Transform T_scene_model = to_transform(T, "T_scene_model");
+        VerifyParams params;
+        params.voxel_size = voxel_size;
+        params.viewpoint = viewpoint;
+        py::gil_scoped_release release;
+        return verify_pose(model, scene, T_scene_model, params);
+      },
+      py::arg("model"), py::arg("scene"), py::arg("T_scene_model"), py::arg("voxel_size"),
+      py::arg("viewpoint"), "verify_pose on clouds with normals; see spectral_vs.verify_pose.");
 
   py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
       .def_property_readonly(
@@ -204,11 +290,32 @@ max_voxels : int
           "window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
           "Voxels of the window Algorithm 1 ran in, per axis.")
       .def_readonly("history", &AlignResult::history)
+      .def_readonly("confidence", &AlignResult::confidence,
+                    "The confidence that the pose is right, in [0, 1]: the share of the model "
+                    "points the sensor would see that lie within a quarter voxel of a scene "
+                    "point turned the same way, times one minus the share it saw through. "
+                    "Above CONFIDENCE_THRESHOLD the pose is taken as right.")
+      .def_readonly("inliers", &AlignResult::inliers,
+                    "Model points within inlier_distance of their nearest scene point.")
+      .def_readonly("inlier_rmse", &AlignResult::inlier_rmse,
+                    "RMS distance of the inliers to their nearest scene points, metres.")
+      .def_readonly("inlier_distance", &AlignResult::inlier_distance,
+                    "The inlier distance d: one voxel_size, metres.")
+      .def_readonly("alternatives", &AlignResult::alternatives,
+                    "Poses more than 5 degrees or 10 mm from this one (and from each other) "
+                    "whose confidence is within 0.05 of this one's, best first.")
+      .def_readonly("ambiguous", &AlignResult::ambiguous,
+                    "True when there is an alternative: the scene does not tell the pose "
+                    "from another one.")
       .def("__repr__", [](const AlignResult& r) {
         std::ostringstream out;
         out << "AlignResult(converged=" << (r.converged ? "True" : "False") << ", stop_reason='"
             << choice_name(r.stop_reason, kStopReasons) << "', iterations=" << r.iterations
-            << ", fitness=" << r.fitness << ", correlation=" << r.correlation << ")";
+            << ", fitness=" << r.fitness << ", correlation=" << r.correlation
+            << ", confidence=" << r.confidence << ", inliers=" << r.inliers
+            << ", inlier_rmse=" << r.inlier_rmse
+            << ", ambiguous=" << (r.ambiguous ? "True" : "False")
+            << ", alternatives=" << r.alternatives.size() << ")";
         return out.str();
       });
 

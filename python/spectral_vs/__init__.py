@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 
 from spectral_vs._core import (
+    AlignAlternative,
     AlignIteration,
     AlignParams,
     AlignResult,
@@ -79,6 +80,7 @@ from spectral_vs.servo import (
     SpectralServo,
     run_servo,
 )
+from spectral_vs.verification import CONFIDENCE_THRESHOLD, PoseVerification, verify_pose
 from spectral_vs.views import align_views
 
 __version__ = "0.1.0"
@@ -113,6 +115,8 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
 
 __all__ = [
+    "CONFIDENCE_THRESHOLD",
+    "AlignAlternative",
     "AlignIteration",
     "AlignParams",
     "AlignResult",
@@ -126,6 +130,7 @@ __all__ = [
     "PhaseCorrelation",
     "PointCloud",
     "PoseError",
+    "PoseVerification",
     "RobotInterface",
     "RotationRefineResult",
     "ServoLog",
@@ -173,6 +178,7 @@ __all__ = [
     "sphere_grid",
     "to_open3d",
     "translation_cost",
+    "verify_pose",
     "view_scale",
     "view_support",
     "voxel_downsample",

@@ -371,6 +371,7 @@ class AlignParams:
         egi_method: str = ...,
         threads: int = ...,
         max_voxels: int = ...,
+        max_alternatives: int = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
@@ -405,6 +406,7 @@ class AlignParams:
     egi_method: str  # "projection" or "histogram"
     threads: int
     max_voxels: int
+    max_alternatives: int
 
 class AlignIteration:
     """One iteration of Algorithm 1, after its update."""
@@ -455,6 +457,66 @@ class AlignResult:
     def icp_iterations(self) -> int: ...
     @property
     def history(self) -> list[AlignIteration]: ...
+    @property
+    def confidence(self) -> float: ...  # in [0, 1]
+    @property
+    def inliers(self) -> int: ...
+    @property
+    def inlier_rmse(self) -> float: ...  # metres
+    @property
+    def inlier_distance(self) -> float: ...  # metres
+    @property
+    def alternatives(self) -> list[AlignAlternative]: ...
+    @property
+    def ambiguous(self) -> bool: ...
+
+class AlignAlternative:
+    """Another pose that the scene supports about as well as the returned one."""
+
+    @property
+    def T_scene_model(self) -> _Array: ...  # (4, 4)
+    @property
+    def confidence(self) -> float: ...
+    @property
+    def inliers(self) -> int: ...
+    @property
+    def inlier_rmse(self) -> float: ...  # metres
+    @property
+    def rotation_apart(self) -> float: ...  # radians
+    @property
+    def translation_apart(self) -> float: ...  # metres
+
+class PoseVerification:
+    """The scene's support of one model pose (verify_pose)."""
+
+    @property
+    def inlier_distance(self) -> float: ...  # metres
+    @property
+    def inliers(self) -> int: ...
+    @property
+    def inlier_rmse(self) -> float: ...  # metres
+    @property
+    def inlier_fraction(self) -> float: ...
+    @property
+    def visible(self) -> int: ...
+    @property
+    def tight(self) -> int: ...
+    @property
+    def seen_through(self) -> int: ...
+    @property
+    def hidden(self) -> int: ...
+    @property
+    def confidence(self) -> float: ...
+
+CONFIDENCE_THRESHOLD: float
+
+def _verify_pose(
+    model: PointCloud,
+    scene: PointCloud,
+    T_scene_model: Any,
+    voxel_size: float,
+    viewpoint: _Array | None,
+) -> PoseVerification: ...
 
 class AxisRotationStep:
     """One rotation step of Algorithm 1 about one axis (rotation_step_about)."""

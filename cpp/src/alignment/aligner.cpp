@@ -6,10 +6,12 @@
 
 #include "alignment/algorithm1.hpp"
 #include "alignment/align_detail.hpp"
+#include "alignment/alternatives.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
+#include "alignment/verifier.hpp"
 #include "common/checks.hpp"
 
 #include <Eigen/Dense>
@@ -86,6 +88,9 @@ void check_params(const AlignParams& p) {
   }
   require_rigid_transform(p.initial_guess, "initial_guess");
   if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
+  if (p.max_alternatives < 0 || p.max_alternatives > 64) {
+    fail("max_alternatives must be in [0, 64], got ", p.max_alternatives);
+  }
 }
 
 using detail::Pose;
@@ -659,8 +664,12 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
                                params.occupancy, phase_params(params), params.limits);
     std::optional<TranslationWindow> window;
     SceneThenWindow source(problem, whole_scene, window);
-    return run_algorithm1(problem, correlation, scene_coefficients, start, source,
-                          params.max_iterations);
+    AlignResult result = run_algorithm1(problem, correlation, scene_coefficients, start, source,
+                                        params.max_iterations);
+    detail::set_verification(result,
+                             detail::Verifier(scene, params.voxel_size, params.scene_viewpoint)
+                                 .verify(model, result.T_scene_model));
+    return result;
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis = flat_axis(model_coefficients, params.bandwidth);
@@ -715,6 +724,14 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     if (params.icp_refinement) refine_with_icp(problem, model, scene, best);
   }
   best.search_voxel_size = search_voxel;
+  const detail::Verifier verifier(scene, params.voxel_size, params.scene_viewpoint);
+  detail::set_verification(best, verifier.verify(model, best.T_scene_model));
+  if (!out_of_time) {
+    detail::AlternativeSources sources{model_coefficients, params.bandwidth, axis, {}};
+    for (const Hypothesis& h : hypotheses)
+      sources.hypotheses.push_back(moving.transform_of(h.pose));
+    detail::find_alternatives(model, verifier, sources, params, best);
+  }
   return best;
 }
 

@@ -10,6 +10,7 @@
 #include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
+#include "alignment/verifier.hpp"
 #include "common/checks.hpp"
 
 #include <algorithm>
@@ -167,6 +168,9 @@ struct ModelAligner::Impl {
     timings.records = loop_timings.records;
     t = Clock::now();
     result.fitness = fitness(scene, map, pose);
+    detail::set_verification(result,
+                             detail::Verifier(scene, params.voxel_size, params.scene_viewpoint)
+                                 .verify(model, result.T_scene_model));
     timings.fitness = seconds_since(t);
     return result;
   }

@@ -114,6 +114,12 @@ bool RangeImage::project(const Eigen::Vector3d& p, Pixel& pixel) const {
   return true;
 }
 
+double RangeImage::depth_gap(const Eigen::Vector3d& p) const {
+  Pixel pixel;
+  if (!project(p, pixel)) return std::numeric_limits<double>::quiet_NaN();
+  return double(depth_[index(pixel.u, pixel.v)]) - double(pixel.depth);
+}
+
 ViewCheck RangeImage::check(const Points& points, const Points& normals, double tolerance,
                             Distance distance) const {
   model_.clear();

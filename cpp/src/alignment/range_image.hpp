@@ -51,6 +51,12 @@ class RangeImage {
   ViewCheck check(const Points& points, const Points& normals, double tolerance,
                   Distance distance = Distance::depth) const;
 
+  /// The scan's depth at p's pixel minus p's own depth from the viewpoint, metres:
+  /// negative where the scan saw something nearer (p hidden), +inf where the scan saw
+  /// nothing there, NaN outside the image or behind the viewpoint.
+  double depth_gap(const Eigen::Vector3d& p) const;
+  const Eigen::Vector3d& viewpoint() const { return viewpoint_; }
+
  private:
   struct Pixel {
     int u, v;

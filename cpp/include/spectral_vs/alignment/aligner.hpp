@@ -4,6 +4,7 @@
 /// II-D, eq. 16-17) and, beyond the paper, a global rotation search that makes the
 /// result independent of the initial rotation.
 
+#include <spectral_vs/alignment/verification.hpp>
 #include <spectral_vs/representation/point_cloud.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
 #include <spectral_vs/rotation/egi_coefficients.hpp>
@@ -113,6 +114,9 @@ struct AlignParams {
   /// grids cost about 28 bytes per voxel (values, FFT buffers), so the default 2^27 voxels
   /// bounds one grid at about 3.8 GB.
   GridLimits limits = {};
+  /// With global search: at most this many alternatives are reported
+  /// (AlignResult::alternatives), in [0, 64]; 0 skips their search (and `ambiguous`).
+  int max_alternatives = 8;
 };
 
 /// Why `align` stopped.
@@ -132,6 +136,17 @@ struct AlignIteration {
   double translation_peak = 0.0;   ///< Phase-correlation peak height in [0, 1].
   Transform T_scene_model = Transform::Identity();  ///< Pose after the update.
   double seconds = 0.0;  ///< Wall time of the iteration (rotation and translation steps), s.
+};
+
+/// Another pose that the scene supports about as well as the returned one (a symmetric
+/// object's, or one whose distinguishing part the view does not show).
+struct AlignAlternative {
+  Transform T_scene_model = Transform::Identity();
+  double confidence = 0.0;         ///< As AlignResult::confidence, for this pose.
+  int inliers = 0;                 ///< As AlignResult::inliers.
+  double inlier_rmse = 0.0;        ///< As AlignResult::inlier_rmse, metres.
+  double rotation_apart = 0.0;     ///< Rotation from the returned pose, radians.
+  double translation_apart = 0.0;  ///< Model centroid from the returned pose's, metres.
 };
 
 /// Outcome of `align`.
@@ -161,7 +176,31 @@ struct AlignResult {
   int polish_evaluations = 0;  ///< Phase correlations of the final polish (0 without).
   int icp_iterations = 0;      ///< Steps of the ICP refinement (0 without, or if not kept).
   std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
+  /// The confidence that the pose is right, in [0, 1] (verify_pose, confidence_of): the
+  /// share of the model points the sensor would see that lie within a quarter voxel of a
+  /// scene point turned the same way, less the share it saw through. Above
+  /// kConfidenceThreshold, the pose is right (docs/experiments.md measures how often).
+  double confidence = 0.0;
+  /// Model points within inlier_distance of their nearest scene point at the pose.
+  int inliers = 0;
+  /// Root mean square distance of the inliers to their nearest scene points, metres.
+  double inlier_rmse = 0.0;
+  double inlier_distance = 0.0;  ///< kInlierVoxels * voxel_size, metres.
+  /// With global search: poses apart from this one by more than 5 degrees or 10 mm (and
+  /// from each other), whose confidence is within 0.05 of this one's, best first, at most
+  /// AlignParams::max_alternatives.
+  std::vector<AlignAlternative> alternatives;
+  /// True when there is an alternative: the scene does not tell the pose apart from
+  /// another one (a symmetric object, or a view that hides its distinguishing part).
+  bool ambiguous = false;
 };
+
+/// A confidence above this separates right from wrong poses: the balanced threshold
+/// (0.848) of 120 poses of the tuning families (C-1, C-2, C-3 and the real scans: defaults,
+/// truncated searches and other objects' models), where it kept 100% of the right poses
+/// and rejected 96% of the wrong ones; docs/experiments.md "Confidence" reports it on
+/// more cases and on the held-out objects.
+inline constexpr double kConfidenceThreshold = 0.85;
 
 /// Aligns `model` onto `scene`: the returned T_scene_model moves the model's points onto
 /// the scene. Both clouds need normals. Rotation is about the model's centroid.

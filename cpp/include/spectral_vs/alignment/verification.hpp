@@ -1,0 +1,74 @@
+#pragma once
+/// @file verification.hpp
+/// Beyond the paper: how far a scene supports a model pose, in quantities with a stated
+/// meaning (inliers, their RMSE, the share of what the sensor would see that it saw), and
+/// the confidence that the pose is right, chosen to separate right from wrong poses
+/// (docs/experiments.md, "Confidence").
+
+#include <spectral_vs/representation/point_cloud.hpp>
+
+#include <Eigen/Core>
+#include <optional>
+
+namespace spectral_vs {
+
+/// Settings of `verify_pose`.
+struct VerifyParams {
+  /// The alignment's voxel edge, metres (AlignParams::voxel_size): the inlier distance is
+  /// kInlierVoxels of it, the tight distance kTightVoxels.
+  double voxel_size = 0.008;
+  /// The sensor origin of a single-view scene, scene coordinates, metres: the model
+  /// points the sensor would see from there are the ones checked. Unset for a scene seen
+  /// from all sides: every model point is.
+  std::optional<Eigen::Vector3d> viewpoint;
+};
+
+/// Inlier distance, in voxels: a model point within this of its nearest scene point.
+inline constexpr double kInlierVoxels = 1.0;
+/// Tight distance, in voxels: what a right pose reaches, refined, on a real scan's noise
+/// (a quarter voxel left right poses of the real bunny scan at 0.6).
+inline constexpr double kTightVoxels = 0.5;
+/// Visibility margin, in voxels: a model point more than this behind the scanned
+/// surface is hidden, more than this in front of it seen through; and the radius in
+/// which its scene neighbour for `tight` is sought.
+inline constexpr double kVisibilityVoxels = 2.0;
+
+/// The scene's support of one pose, every count over model points moved by the pose.
+struct PoseVerification {
+  double inlier_distance = 0.0;  ///< d = kInlierVoxels * voxel_size, metres.
+  /// Model points whose nearest scene point is within d (Euclidean, normals ignored).
+  int inliers = 0;
+  /// Root mean square of those nearest distances over the inliers, metres (0 with none).
+  double inlier_rmse = 0.0;
+  /// inliers / model points, in [0, 1]: Open3D's `fitness` with max distance d.
+  double inlier_fraction = 0.0;
+  /// Model points the sensor would see: with a viewpoint, the ones facing it, in its view
+  /// and not more than kVisibilityVoxels voxels behind the scanned surface (a range image
+  /// of one-voxel pixels); without, all of them.
+  int visible = 0;
+  /// Of the visible points: within kTightVoxels * voxel_size of the tangent plane of
+  /// their nearest scene point within kVisibilityVoxels voxels whose normal is within 45
+  /// degrees of theirs.
+  int tight = 0;
+  /// Of the visible points: more than kVisibilityVoxels voxels in front of the scanned
+  /// surface and no inlier, where the sensor saw through them (0 without a viewpoint).
+  int seen_through = 0;
+  /// Model points facing the viewpoint, in its view, more than kVisibilityVoxels voxels
+  /// behind the scanned surface (0 without a viewpoint): neither confirmed nor refuted.
+  int hidden = 0;
+  /// The confidence that the pose is right, in [0, 1] (see `confidence_of`).
+  double confidence = 0.0;
+};
+
+/// The confidence of a verified pose, in [0, 1]: tight / visible, times one minus the
+/// share of visible points the sensor saw through: the share of what the sensor would
+/// see of the model that it saw, where the model is, turned the same way.
+double confidence_of(const PoseVerification& verification);
+
+/// The scene's support of the model at T_scene_model (see PoseVerification).
+/// @throws std::invalid_argument for an empty cloud, missing normals, a voxel_size that
+///         is not finite and > 0, a non-finite viewpoint or a T that is not rigid.
+PoseVerification verify_pose(const PointCloud& model, const PointCloud& scene,
+                             const Transform& T_scene_model, const VerifyParams& params = {});
+
+}  // namespace spectral_vs

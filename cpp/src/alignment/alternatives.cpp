@@ -1,0 +1,183 @@
+#include "alignment/alternatives.hpp"
+
+#include <spectral_vs/rotation/so3.hpp>
+#include <spectral_vs/rotation/so3_search.hpp>
+
+#include "alignment/icp_refinement.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+
+namespace spectral_vs::detail {
+
+namespace {
+
+// The model's near-symmetries: the best maxima of its EGI correlated with itself (the
+// identity first, dropped). 24 holds the rotation group of a cube.
+constexpr int kSelfCandidates = 24;
+// Turns tried about a flat EGI axis (a mug's, a cylinder's): every 10 degrees, so that
+// any turn is within 5 degrees of one of them.
+constexpr double kAxisStep = 10.0 * M_PI / 180.0;
+// Hypotheses of the global search tried as they are.
+constexpr std::size_t kHypotheses = 8;
+// Candidates refined by ICP, per alternative asked for: the best by inlier count first.
+constexpr int kRefinedPerAlternative = 2;
+// A candidate is dropped before the ICP below this share of the returned pose's inliers.
+constexpr double kMinInlierShare = 0.5;
+
+struct Candidate {
+  Transform T = Transform::Identity();
+  PoseVerification verification;
+  bool turn = false;  // a turn about the flat axis: its rotation is kept (see below)
+};
+
+// Point-to-plane steps of the translation alone. A turn about a flat EGI axis is refined
+// so: a full ICP slides along the surface's free turn (a mug whose handle is hidden) and
+// would leave the turns tried every kAxisStep unevenly spread; the translation takes
+// up the turn of the model about its centroid rather than its axis.
+constexpr int kTranslationSteps = 10;
+
+Transform refine_translation(const PointCloud& model, const IcpScene& scene, Transform T,
+                             double max_distance, const std::optional<Eigen::Vector3d>& viewpoint) {
+  const Eigen::Index stride = std::max<Eigen::Index>(1, model.points().rows() / 1500);
+  for (int step = 0; step < kTranslationSteps; ++step) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    int pairs = 0;
+    for (Eigen::Index i = 0; i < model.points().rows(); i += stride) {
+      const Eigen::Vector3d p =
+          T.topLeftCorner<3, 3>() * model.points().row(i).transpose() + T.topRightCorner<3, 1>();
+      const Eigen::Vector3d n = T.topLeftCorner<3, 3>() * model.normals().row(i).transpose();
+      if (viewpoint && n.dot(*viewpoint - p) <= 0.0) continue;
+      const Eigen::Index j = scene.nearest(p, n, max_distance, 0.7071);
+      if (j < 0) continue;
+      const Eigen::Vector3d q = scene.cloud().points().row(j).transpose();
+      const Eigen::Vector3d m = scene.cloud().normals().row(j).transpose();
+      A += m * m.transpose();
+      b += m * m.dot(q - p);
+      ++pairs;
+    }
+    if (pairs < 6) break;
+    const Eigen::Vector3d shift = A.completeOrthogonalDecomposition().solve(b);
+    T.topRightCorner<3, 1>() += shift;
+    if (shift.norm() < 2e-5) break;
+  }
+  return T;
+}
+
+// T_scene_model composed with the turn R of the model about its centroid c.
+Transform turned(const Transform& T, const Eigen::Matrix3d& R, const Eigen::Vector3d& c) {
+  Transform A = Transform::Identity();
+  A.topLeftCorner<3, 3>() = R;
+  A.topRightCorner<3, 1>() = c - R * c;
+  return T * A;
+}
+
+bool apart(const Transform& a, const Transform& b, const Eigen::Vector3d& centroid) {
+  const double degrees =
+      rotation_distance(a.topLeftCorner<3, 3>(), b.topLeftCorner<3, 3>()) * 180.0 / M_PI;
+  const Eigen::Vector4d c(centroid.x(), centroid.y(), centroid.z(), 1.0);
+  const double metres = ((a - b) * c).head<3>().norm();
+  return degrees > kApartDegrees || metres > kApartMetres;
+}
+
+}  // namespace
+
+void find_alternatives(const PointCloud& model, const Verifier& verifier,
+                       const AlternativeSources& sources, const AlignParams& params,
+                       AlignResult& result) {
+  result.alternatives.clear();
+  result.ambiguous = false;
+  if (params.max_alternatives == 0) return;
+  const Eigen::Vector3d c = model.centroid();
+  const Transform& T = result.T_scene_model;
+
+  std::vector<Transform> poses;
+  std::vector<char> turns;
+  try {
+    So3Correlation self(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
+                        true);
+    So3SearchParams search;
+    search.candidates = kSelfCandidates;
+    search.threads = params.threads;
+    RotationRefineParams refine;
+    for (const RotationCandidate& candidate : so3_search(
+             sources.model_coefficients, sources.model_coefficients, sources.bandwidth, search)) {
+      const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
+      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
+        poses.push_back(turned(T, R, c));
+        turns.push_back(0);
+      }
+    }
+  } catch (const std::invalid_argument&) {
+    // A uniform EGI (a sphere's): no rotation stands out.
+  }
+  if (sources.flat_axis) {
+    const int count = static_cast<int>(std::lround(2.0 * M_PI / kAxisStep));
+    for (int k = 1; k < count; ++k) {
+      poses.push_back(turned(T, exp_so3(double(k) * kAxisStep * *sources.flat_axis), c));
+      turns.push_back(1);
+    }
+  }
+  for (std::size_t h = 0; h < std::min(kHypotheses, sources.hypotheses.size()); ++h) {
+    poses.push_back(sources.hypotheses[h]);
+    turns.push_back(0);
+  }
+
+  // The likeliest by inliers first (cheap), then refined as the returned pose was.
+  std::vector<Candidate> candidates;
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    const Transform& pose = poses[k];
+    if (!apart(pose, T, c)) continue;
+    Candidate candidate{pose, verifier.verify(model, pose), turns[k] != 0};
+    if (candidate.verification.inliers >= kMinInlierShare * result.inliers)
+      candidates.push_back(candidate);
+  }
+  std::stable_sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
+    return a.verification.inliers > b.verification.inliers;
+  });
+  candidates.resize(std::min<std::size_t>(
+      candidates.size(), std::size_t(kRefinedPerAlternative * params.max_alternatives)));
+  IcpSettings icp;
+  icp.viewpoint = params.scene_viewpoint;
+  for (Candidate& candidate : candidates) {
+    if (candidate.turn) {
+      candidate.T = refine_translation(model, verifier.grid(), candidate.T, params.voxel_size,
+                                       params.scene_viewpoint);
+      candidate.verification = verifier.verify(model, candidate.T);
+      continue;
+    }
+    for (const double distance : {1.0, 0.4}) {
+      icp.max_distance = distance * params.voxel_size;
+      const IcpOutcome outcome = refine_point_to_plane(model, verifier.grid(), candidate.T, icp);
+      if (outcome.iterations > 0) candidate.T = outcome.T_scene_model;
+    }
+    candidate.verification = verifier.verify(model, candidate.T);
+  }
+  std::stable_sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
+    return a.verification.confidence > b.verification.confidence;
+  });
+  for (const Candidate& candidate : candidates) {
+    if (int(result.alternatives.size()) == params.max_alternatives) break;
+    if (candidate.verification.confidence < result.confidence - kAlternativeMargin) break;
+    if (!apart(candidate.T, T, c)) continue;
+    const bool distinct = std::all_of(
+        result.alternatives.begin(), result.alternatives.end(),
+        [&](const AlignAlternative& kept) { return apart(candidate.T, kept.T_scene_model, c); });
+    if (!distinct) continue;
+    AlignAlternative alternative;
+    alternative.T_scene_model = candidate.T;
+    alternative.confidence = candidate.verification.confidence;
+    alternative.inliers = candidate.verification.inliers;
+    alternative.inlier_rmse = candidate.verification.inlier_rmse;
+    alternative.rotation_apart =
+        rotation_distance(candidate.T.topLeftCorner<3, 3>(), T.topLeftCorner<3, 3>());
+    const Eigen::Vector4d h(c.x(), c.y(), c.z(), 1.0);
+    alternative.translation_apart = ((candidate.T - T) * h).head<3>().norm();
+    result.alternatives.push_back(alternative);
+  }
+  result.ambiguous = !result.alternatives.empty();
+}
+
+}  // namespace spectral_vs::detail

@@ -1,0 +1,234 @@
+"""The confidence of align() and verify_pose (inliers, their RMSE, the share of the view
+that the scan confirms), the alternatives of symmetric objects, and the held-out
+validation objects of benchmarks/cases.py.
+
+Expected values are computed by hand or by brute force here, never by the code under
+test; tolerances are in millimetres and degrees."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import spectral_vs as svs
+
+pytest.importorskip("pybullet")  # the meshes come with pybullet_data
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import cases
+from test_benchmark_cases import is_symmetry
+
+MM = 1e-3
+UP = (0.0, 0.0, 1.0)
+
+
+def cloud(points, normals) -> svs.PointCloud:
+    return svs.PointCloud(np.asarray(points, dtype=float), np.asarray(normals, dtype=float))
+
+
+# --- verify_pose on hand-computed cases ---------------------------------------------------
+
+
+def test_inliers_and_rmse_are_the_nearest_distances_within_one_voxel():
+    scene = cloud([[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]], [UP] * 3)
+    # Nearest distances by hand: 3, 6, 5 mm (inliers at d = 8 mm), 300 mm, 1 mm.
+    model = cloud(
+        [[0, 0, 0.003], [0.1, 0, 0.006], [0.2, 0.005, 0], [0.5, 0, 0], [0, 0, 0.001]],
+        [UP, UP, UP, UP, (0.0, 0.0, -1.0)],
+    )
+    v = svs.verify_pose(model, scene, np.eye(4), voxel_size=0.008, downsample=False)
+    assert v.inlier_distance == pytest.approx(8 * MM)
+    assert v.inliers == 4
+    assert v.inlier_rmse == pytest.approx(math.sqrt((9 + 36 + 25 + 1) / 4) * MM, abs=1e-9)
+    assert v.inlier_fraction == pytest.approx(0.8)
+    # Tight: within 4 mm of the scene's tangent plane and turned within 45 degrees.
+    assert (v.visible, v.tight, v.seen_through, v.hidden) == (5, 2, 0, 0)
+    assert v.confidence == pytest.approx(2 / 5)
+
+
+def test_moving_the_model_moves_its_inliers_with_it():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-0.05, 0.05, size=(400, 3))
+    points[:, 2] = 0.0
+    scene = cloud(points, np.tile(UP, (400, 1)))
+    T = np.eye(4)
+    T[2, 3] = 0.003  # the model 3 mm above the plane: every point an inlier at 3 mm
+    v = svs.verify_pose(scene, scene, T, voxel_size=0.008, downsample=False)
+    assert v.inliers == 400
+    assert v.inlier_rmse == pytest.approx(3 * MM, abs=1e-9)
+    assert v.tight == 400  # 3 mm <= half a voxel from the plane
+    T[2, 3] = 0.005
+    assert svs.verify_pose(scene, scene, T, voxel_size=0.008, downsample=False).tight == 0
+
+
+def test_verify_pose_names_bad_arguments():
+    scene = cloud([[0, 0, 0], [0.1, 0, 0]], [UP] * 2)
+    with pytest.raises(ValueError, match="voxel_size"):
+        svs.verify_pose(scene, scene, np.eye(4), voxel_size=0.0, downsample=False)
+    skewed = np.eye(4)
+    skewed[0, 1] = 0.5
+    with pytest.raises(ValueError, match="T_scene_model"):
+        svs.verify_pose(scene, scene, skewed, downsample=False)
+    with pytest.raises(ValueError, match="viewpoint"):
+        svs.verify_pose(scene, scene, np.eye(4), scene_viewpoint=(0, math.nan, 0))
+
+
+def test_align_reports_what_verify_pose_measures():
+    case = cases.make_case(cases.CaseSpec("partial", "duck", 60.0, 0))
+    result = svs.align(case.model_cloud(), case.scene_cloud(), scene_viewpoint=case.viewpoint)
+    v = svs.verify_pose(
+        case.model_cloud(), case.scene_cloud(), result.T_scene_model,
+        scene_viewpoint=case.viewpoint,
+    )  # fmt: skip
+    assert result.confidence == pytest.approx(v.confidence, abs=1e-12)
+    assert result.inliers == v.inliers
+    assert result.inlier_rmse == pytest.approx(v.inlier_rmse, abs=1e-12)
+    assert result.inlier_distance == pytest.approx(0.008)
+    rotation, translation = cases.pose_error(case, result.T_scene_model)
+    assert rotation < 5.0 and translation < 10 * MM
+    assert result.confidence > svs.CONFIDENCE_THRESHOLD
+    # The same pose turned by 90 degrees about the duck's centroid is wrong and says so.
+    wrong = result.T_scene_model @ cases.rotation_about(
+        cases.axis_angle(np.array([1.0, 0.0, 0.0]), math.pi / 2), case.model_center
+    )
+    w = svs.verify_pose(
+        case.model_cloud(), case.scene_cloud(), wrong, scene_viewpoint=case.viewpoint
+    )
+    assert w.confidence < svs.CONFIDENCE_THRESHOLD
+
+
+# --- Alternatives of symmetric objects ----------------------------------------------------
+
+
+def exact_error(T_true: np.ndarray, T: np.ndarray, center: np.ndarray) -> tuple[float, float]:
+    """Rotation (degrees) and centroid (metres) error against T_true itself, no symmetry."""
+    c = np.append(center, 1.0)
+    return (
+        cases.rotation_angle_deg(T[:3, :3].T @ T_true[:3, :3]),
+        float(np.linalg.norm((T @ c - T_true @ c)[:3])),
+    )
+
+
+def reported(result) -> list[np.ndarray]:
+    return [result.T_scene_model, *[a.T_scene_model for a in result.alternatives]]
+
+
+def truth_among(result, T_true: np.ndarray, center: np.ndarray) -> bool:
+    return any(
+        r < 5.0 and t < 10 * MM
+        for r, t in (exact_error(T_true, T, center) for T in reported(result))
+    )
+
+
+@pytest.mark.parametrize(("name", "angle"), [("jenga", 120.0), ("lego", 90.0)])
+def test_a_box_and_a_brick_report_the_true_pose_among_their_symmetric_ones(name, angle):
+    case = cases.make_case(cases.CaseSpec("full", name, angle, 0))
+    result = svs.align(case.model_cloud(), case.scene_cloud())
+    assert result.ambiguous
+    assert truth_among(result, case.T_true, case.model_center)
+    # Every exact symmetry of the object is a pose the scene supports: reported too.
+    for S in case.symmetries:
+        assert truth_among(result, case.T_true @ S, case.model_center)
+    for a in result.alternatives:
+        assert a.confidence >= result.confidence - 0.05
+        assert math.degrees(a.rotation_apart) > 5.0 or a.translation_apart > 10 * MM
+
+
+def mug_without_its_handle() -> tuple[svs.PointCloud, svs.PointCloud, np.ndarray]:
+    """The mug upright at the origin, seen from 0.5 m at 20 degrees elevation from the
+    side opposite its handle (the handle's direction: the horizontal direction of the
+    vertex farthest from the mug's axis)."""
+    rng = np.random.default_rng(11)
+    mesh = cases.load_mesh("mug")
+    model_points, model_normals = cases.sample_surface(mesh, cases.MODEL_SAMPLES, rng)
+    body = np.median(np.linalg.norm(mesh.vertices[:, :2], axis=1))
+    far = mesh.vertices[np.argmax(np.linalg.norm(mesh.vertices[:, :2], axis=1))]
+    assert np.linalg.norm(far[:2]) > 1.3 * body  # the handle sticks out
+    away = -far[:2] / np.linalg.norm(far[:2])
+    elevation = math.radians(20.0)
+    eye = 0.5 * np.array([*(math.cos(elevation) * away), math.sin(elevation)])
+    T_world_camera = cases.look_at(eye, np.zeros(3))
+    r = cases.renderer()
+    r.reset()
+    r.add_mesh(mesh.vertices, mesh.faces, np.eye(4))
+    depth, _ = r.render(T_world_camera, cases.intrinsics())
+    points, normals = cases._scan(depth, T_world_camera, rng)
+    # The handle is hidden: no scanned point is within 5 mm of the handle's tip.
+    assert np.min(np.linalg.norm(points - far, axis=1)) > 5 * MM
+    return cloud(model_points, model_normals), cloud(points, normals), eye
+
+
+def test_a_mug_seen_without_its_handle_is_ambiguous_and_reports_the_true_pose():
+    model, scene, eye = mug_without_its_handle()
+    result = svs.align(model, scene, scene_viewpoint=eye)
+    assert result.ambiguous
+    assert truth_among(result, np.eye(4), np.zeros(3))
+
+
+@pytest.mark.parametrize("name", ["bunny", "duck"])
+def test_an_asymmetric_object_is_not_ambiguous(name):
+    case = cases.make_case(cases.CaseSpec("full", name, 120.0, 0))
+    result = svs.align(case.model_cloud(), case.scene_cloud())
+    rotation, translation = cases.pose_error(case, result.T_scene_model)
+    assert rotation < 5.0 and translation < 10 * MM
+    assert not result.ambiguous
+    assert result.alternatives == []
+
+
+def test_max_alternatives_zero_skips_the_search():
+    case = cases.make_case(cases.CaseSpec("full", "jenga", 30.0, 0))
+    result = svs.align(case.model_cloud(), case.scene_cloud(), max_alternatives=0)
+    assert result.alternatives == [] and not result.ambiguous
+    with pytest.raises(ValueError, match="max_alternatives"):
+        svs.align(case.model_cloud(), case.scene_cloud(), max_alternatives=-1)
+
+
+# --- The held-out validation set ----------------------------------------------------------
+
+
+def test_the_held_out_objects_are_new_meshes_and_enough_of_them():
+    held = cases.HELDOUT_OBJECTS
+    assert len(held) >= 6
+    used = {spec.obj for spec in cases.OBJECTS.values()}
+    assert not used & {spec.obj for spec in held.values()}
+    assert not set(held) & set(cases.OBJECTS)
+    for family in cases.HELDOUT_FAMILIES:
+        assert set(cases.FAMILY_OBJECTS[family]) == set(held)
+        assert family not in cases.TUNING_FAMILIES
+
+
+@pytest.mark.parametrize("name", list(cases.HELDOUT_OBJECTS))
+def test_held_out_objects_have_their_stated_symmetries_only(name):
+    mesh = cases.load_mesh(name)
+    extent = mesh.vertices.max(0) - mesh.vertices.min(0)
+    assert 0.08 - 1e-9 <= extent.max() <= 0.25 + 1e-9
+    rotations = cases.HELDOUT_OBJECTS[name].symmetry.rotations
+    for R in rotations[1:]:
+        assert is_symmetry(mesh, R)
+    if len(rotations) == 1:
+        _, axes = np.linalg.eigh(np.cov(mesh.vertices.T))
+        for axis in [*np.eye(3), *axes.T]:
+            assert not is_symmetry(mesh, cases.axis_angle(axis, math.pi))
+
+
+@pytest.mark.parametrize("family", ["heldout_full", "heldout_partial", "heldout_clutter"])
+def test_held_out_cases_are_built_in_each_condition(family):
+    spec = cases.CaseSpec(family, "panda_link3", 90.0, 0)
+    case = cases.make_case(spec)
+    assert case.condition == cases.CONDITIONS[family]
+    # T_true maps the model onto the scene: the nearest scene point of a model point moved
+    # by it is within the noise and sampling (brute force on a subset).
+    moved = cases.apply(case.T_true, case.model_points[::25])
+    nearest = np.min(np.linalg.norm(moved[:, None] - case.scene_points[None, ::3], axis=2), axis=1)
+    assert np.percentile(nearest, 50 if family == "heldout_full" else 10) < 5 * MM
+    if family == "heldout_clutter":
+        others = case.info["objects"][1:]
+        assert 2 <= len(others) <= 3 and set(others) <= set(cases.HELDOUT_OBJECTS)
+    # The same spec gives the same case.
+    again = cases.make_case(spec)
+    np.testing.assert_array_equal(case.scene_points, again.scene_points)
