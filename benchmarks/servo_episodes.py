@@ -13,7 +13,8 @@ servo has locked on:
 * ``outage for good``: ``Outage(2.0, inf)``, the camera lost: the servo must stop.
 
 Panda (``docs/figures/servo_panda.png``): the Panda preset from large start
-``--panda-start`` (seed 0), the layout of the paper's Fig. 6 (``servo.plot_servo``).
+``--panda-start`` (seed 0), the layout of the paper's Fig. 6 (``servo.plot_servo``); and
+both presets at home seen from beside the table (``docs/figures/servo_robots.png``).
 
 Writes ``benchmarks/results/servo_episodes.json`` (per run: how it ended, the final
 error, the held steps and why, the true error of every step). Usage::
@@ -85,6 +86,7 @@ def record(log: servo_lib.ServoLog, robot: sim.PyBulletRobot, T_reference: np.nd
         "steps": len(log.records),
         "time_s": [round(x.time, 3) for x in log.records],
         "hold": [x.hold for x in log.records],
+        "occluded_points": [int(x.occluded_points) for x in log.records],
         "true_mm": np.round(errors[:, 0], 3).tolist(),
         "true_deg": np.round(errors[:, 1], 4).tolist(),
     }
@@ -158,6 +160,43 @@ def run_panda(start_index: int) -> tuple[dict, Any]:
     return row, log
 
 
+def render_robots(path: Path) -> None:
+    """Both presets at home, rendered from beside the table (PyBullet's TinyRenderer)."""
+    from spectral_vs.plotting import _new_figure
+
+    figure = _new_figure(11.0, 4.4)
+    axes = figure.subplots(1, 2)
+    for axis, name in zip(axes, peers.ROBOTS, strict=True):
+        with sim.PyBulletRobot(peers.sim_params(name)) as robot:
+            client = robot.client
+            view = client.computeViewMatrix(
+                cameraEyePosition=[1.75, -1.45, 1.25],
+                cameraTargetPosition=[0.35, 0.0, 0.38],
+                cameraUpVector=[0, 0, 1],
+            )
+            projection = client.computeProjectionMatrixFOV(
+                fov=45, aspect=4 / 3, nearVal=0.05, farVal=6.0
+            )
+            image = client.getCameraImage(
+                640,
+                480,
+                viewMatrix=view,
+                projectionMatrix=projection,
+                renderer=client.ER_TINY_RENDERER,
+            )
+            rgb = np.reshape(np.asarray(image[2], dtype=np.uint8), (480, 640, 4))[:, :, :3]
+            axis.imshow(rgb)
+            axis.set_axis_off()
+            model = robot.params.robot
+            axis.set_title(
+                f"{name}: {model.urdf_path.parent.name}/{model.urdf_path.name}, "
+                f"{len(model.home_q)} joints, at home",
+                fontsize="medium",
+            )
+    figure.suptitle("The two presets at home: the wrist camera 0.55 m above the same table")
+    figure.savefig(path)
+
+
 def plot_faults(results: dict, path: Path) -> None:
     """True error over time of every fault run, the fault's window shaded, held steps marked."""
     from spectral_vs.plotting import _new_figure
@@ -197,6 +236,17 @@ def plot_faults(results: dict, path: Path) -> None:
                         zorder=3,
                         label=f"held: {hold}",
                     )
+            found = [i for i, n in enumerate(run.get("occluded_points", [])) if n > 0]
+            if found:
+                axis.scatter(
+                    t[found],
+                    values[found],
+                    marker="^",
+                    color="tab:orange",
+                    s=22,
+                    zorder=3,
+                    label="occluder found, its points dropped",
+                )
             axis.axhline(limit, color="tab:red", linestyle="--", linewidth=0.9)
             axis.set_yscale("log")
             axis.set_ylabel(unit)
@@ -208,7 +258,7 @@ def plot_faults(results: dict, path: Path) -> None:
                     fontsize="medium",
                     loc="left",
                 )
-            if any(run["hold"]):
+            if any(run["hold"]) or found:
                 axis.legend(fontsize="x-small", loc="upper right")
     for axis in axes[-1]:
         axis.set_xlabel("time since the start (s, robot clock)")
@@ -231,11 +281,13 @@ def main() -> None:
     if args.report_only:
         results = json.loads(RESULTS.read_text())
         plot_faults(results["faults"], FIGURES / "servo_faults.png")
+        render_robots(FIGURES / "servo_robots.png")
         return
     started = time.perf_counter()
     fault_runs = run_faults(args.start)
     plot_faults(fault_runs, FIGURES / "servo_faults.png")
     panda, _ = run_panda(args.panda_start)
+    render_robots(FIGURES / "servo_robots.png")
     RESULTS.write_text(
         json.dumps(
             {

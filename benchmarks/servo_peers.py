@@ -291,6 +291,8 @@ def run(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
                         }
                         RUNS.mkdir(parents=True, exist_ok=True)  # after every start
                         run_file(robot_name, name, label).write_text(json.dumps(out) + "\n")
+    if not args.quick:
+        write_report()
 
 
 def report_lib_machine() -> dict[str, Any]:
@@ -377,11 +379,14 @@ def joined(runs: dict[tuple[str, str, str], dict]) -> dict:
     for robot in ROBOTS:
         for name in SETS:
             spectral = runs.get((robot, name, SPECTRAL))
+            present = [runs[k] for k in runs if k[:2] == (robot, name)]
+            # Every controller on the same starts: the first ones all of them completed.
+            shared = min((len(d["records"]) for d in present), default=0)
             for label in CONTROLLERS:
                 data = runs.get((robot, name, label))
                 if data is None:
                     continue
-                summary = cell_summary(data)
+                summary = cell_summary(data | {"records": data["records"][:shared]})
                 cells.append({"robot": robot, "set": name, "controller": label} | summary)
                 if spectral is None or label == SPECTRAL:
                     continue
