@@ -390,7 +390,7 @@ def joined(runs: dict[tuple[str, str, str], dict]) -> dict:
                 cells.append({"robot": robot, "set": name, "controller": label} | summary)
                 if spectral is None or label == SPECTRAL:
                     continue
-                common = min(len(spectral["records"]), len(data["records"]))
+                common = shared
                 for a, b in zip(
                     spectral["records"][:common], data["records"][:common], strict=True
                 ):
