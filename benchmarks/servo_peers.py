@@ -441,9 +441,10 @@ def provenance(runs: dict[tuple[str, str, str], dict]) -> list[str]:
         loads = [d["machine"]["load_average"] for d in chosen]
         minutes = sum(d["runtime_s"] for d in chosen) / 60
         lines.append(
-            f"- {label}: commit {', '.join(commits)}; {dates[0]} to {dates[-1]}; load average "
-            f"{min(loads):.1f}-{max(loads):.1f} at the starts of its runs; {minutes:.0f} min "
-            f"for {sum(len(d['records']) for d in chosen)} runs."
+            f"- {label}: commit {', '.join(commits)}; files last written {dates[0]} to "
+            f"{dates[-1]}; load average {min(loads):.1f}-{max(loads):.1f} when its processes "
+            f"started; {sum(len(d['records']) for d in chosen)} runs, {minutes:.0f} min of "
+            "wall time summed over them."
         )
     return lines
 
