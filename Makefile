@@ -106,11 +106,12 @@ bench-peers: install
 	SPECTRAL_VS_DATA=$(DATA) $(PY) benchmarks/peers_benchmark.py
 
 # The spectral servo against the dense depth-map servo and ICP / FPFH position-based
-# servoing on the same simulated start poses (about 35 minutes on 2 cores):
-# benchmarks/results/servo_peers.json, docs/figures/servo_peers.png, docs/benchmarks.md.
+# servoing on the same simulated start poses of both arms (several hours on 2 cores):
+# benchmarks/results/servo_peers/, servo_peers.json, docs/figures/servo_domain.png and
+# servo_step_times.png, docs/benchmarks.md and docs/servoing.md.
 bench-servo-peers: install
 	$(PY) -m pip install -q $(PIP_BENCH)
-	$(PY) benchmarks/servo_peers.py
+	$(PY) benchmarks/servo_peers.py --starts 10
 
 # Scene-to-scene registration on view pairs of the real scans and of the simulation: ours
 # (when the library has `align_views`) against Open3D ICP, FPFH + RANSAC + ICP and

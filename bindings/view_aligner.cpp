@@ -227,14 +227,20 @@ hypotheses : list of (ndarray (4, 4), ViewSupport)
 
   m.def(
       "align_views",
-      [](const PointCloud& reference, const PointCloud& current, const ViewAlignParams& p) {
+      [](const PointCloud& reference, const PointCloud& current, const ViewAlignParams& p,
+         const py::handle& prior) {
+        std::optional<Transform> pose;
+        if (!prior.is_none()) pose = to_transform(prior, "prior");
         py::gil_scoped_release release;
-        return align_views(reference, current, p);
+        return align_views(reference, current, p, pose);
       },
       py::arg("reference"), py::arg("current"), py::arg("params") = ViewAlignParams(),
+      py::arg("prior") = py::none(),
       "Registers the reference view onto the current view (both with normals toward their "
       "sensors): a ViewAlignResult whose T_current_reference maps reference points into the "
-      "current view.");
+      "current view. A prior T_current_reference (4 x 4) is refined and scored beside the "
+      "search's hypotheses and kept (hypothesis -1) unless a searched pose is better "
+      "supported.");
 }
 
 }  // namespace spectral_vs::python

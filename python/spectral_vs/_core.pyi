@@ -683,7 +683,10 @@ def view_support(
     params: ViewAlignParams = ...,
 ) -> ViewSupport: ...
 def align_views(
-    reference: PointCloud, current: PointCloud, params: ViewAlignParams = ...
+    reference: PointCloud,
+    current: PointCloud,
+    params: ViewAlignParams = ...,
+    prior: npt.ArrayLike | None = None,
 ) -> ViewAlignResult: ...
 
 # --- Kinematics (bindings/kinematics.cpp) ------------------------------------

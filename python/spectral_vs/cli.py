@@ -672,6 +672,9 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                     and np.degrees(final_r) < MAX_SERVO_ERROR_DEG
                 ),
                 "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
+                "servo_step_cpu_ms": [
+                    round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")
+                ],
                 "wall_s": log.wall_seconds,
             }
             runs.append(run)

@@ -104,6 +104,22 @@ _CLOCK_TOLERANCE = 1e-9
 #: captured): its bins (2.9 degrees) then hold about 10 points each at 160 x 120.
 _OCCLUSION_REFERENCE_POINTS = 5000
 
+#: Current points that bound the view's field (a strided subsample), and the least depth
+#: of a point in front of the camera, m (field_share).
+_FIELD_POINTS = 4000
+_FIELD_NEAR = 1e-3
+#: The confidence of an estimate is its fitness over the share of the reference in the
+#: field, but at least over this share (the extreme starts keep 30% in the field).
+_MIN_FIELD_SHARE = 0.3
+
+
+def _rigid_inverse(T: np.ndarray) -> np.ndarray:
+    """The inverse of a rigid 4 x 4 transform, ``[R^T | -R^T t]``."""
+    inverse = np.eye(4)
+    inverse[:3, :3] = T[:3, :3].T
+    inverse[:3, 3] = -(T[:3, :3].T @ T[:3, 3])
+    return inverse
+
 
 # --------------------------------------------------------------------------- settings
 
@@ -166,6 +182,9 @@ class ServoParams:
         Converged when the estimated translation error is below this, m ...
     rotation_tolerance : float
         ... and the estimated rotation error below this, rad (the servo form of eq. 17) ...
+        The camera stops within about the tolerance plus the estimate's bias: at 1 mm and
+        0.2 degree the iiwa's final errors had a median up to 1.4 mm; at 0.5 mm and 0.1
+        degree, 0.6 mm on 6 moderate starts (docs/servoing.md).
     min_fitness : float
         ... and the registration's fitness (share of reference voxels matched) is at least
         this: a wrong local optimum can also have a small step. On a table top the table
@@ -242,16 +261,29 @@ class ServoParams:
     relocalize : bool
         Register the reference onto the current view globally
         (:func:`spectral_vs.align_views`: any rotation, any translation within the views)
-        when the servo has no trusted estimate: at its first step, and at the step after a
-        registration whose fitness was below ``relocalize_fitness`` (the view moved far, or
-        the estimate slid off). The global result, if its support score reaches
-        ``relocalize_score``, becomes the estimate the step's cheap registration starts
-        from; from then on every registration starts from the last estimate carried along
-        the camera's measured motion (the warm start), so the servo tracks it.
+        when the servo has no trusted estimate: at its first step, and after a registration
+        whose confidence was below ``relocalize_fitness`` (the view moved far, or the
+        estimate slid off), at most every ``relocalize_interval`` steps. The estimate
+        tracked so far goes in as the global search's prior: it is refined beside the
+        search's hypotheses and kept unless a searched pose is better supported. The
+        result, if its support score reaches ``relocalize_score``, becomes the estimate
+        the step's cheap registration starts from; from then on every registration starts
+        from the last estimate carried along the camera's measured motion (the warm
+        start) and seeks only ``tracking_translation``, so the servo tracks it.
     relocalize_fitness : float
-        A registration with a fitness below this is poor: the next step relocalizes, in
-        [0, 1]. 0.8 brought back 17 of the 20 large iiwa starts (seed 0) against 14 at 0.5,
-        where runs tracked a wrong estimate at fitness 0.5-0.8 (docs/servoing.md).
+        Least confidence of a tracked estimate, in [0, 1]: its fitness over the part of
+        the reference that the estimate puts inside the current view's field (the
+        fitness counts the whole reference; a view that sees half of it fits at most
+        half). Below it the servo relocalizes.
+    relocalize_interval : int
+        Least number of steps from a confirmed relocalization to the next, >= 1: a global
+        registration costs 10-30 steps' worth of tracking. Confirmed: its support score
+        reached ``relocalize_score`` and the step's registration from it reached the
+        confidence ``relocalize_fitness``.
+    relocalize_retry : int
+        Least number of steps from an unconfirmed relocalization to the next, in [1,
+        ``relocalize_interval``]: from a view the search cannot register (the views share
+        too little) the camera moves on, and a later view may do.
     relocalize_score : float
         Least support score (:class:`spectral_vs.ViewSupport`) of a global registration
         that the servo takes, in [0, 1]; below it the step goes on from its own estimate.
@@ -301,8 +333,8 @@ class ServoParams:
     global_search: bool = False
     max_iterations: int = 30
     warm_start: bool = False
-    translation_tolerance: float = 0.001
-    rotation_tolerance: float = math.radians(0.2)
+    translation_tolerance: float = 0.0005
+    rotation_tolerance: float = math.radians(0.1)
     min_fitness: float = 0.95
     step_tolerance: float = 0.0
     max_linear_speed: float = 0.1
@@ -319,6 +351,8 @@ class ServoParams:
     occlusion_min_share: float = 0.01
     relocalize: bool = True
     relocalize_fitness: float = 0.8
+    relocalize_interval: int = 10
+    relocalize_retry: int = 2
     relocalize_score: float = 0.05
     plane_turn: bool = True
     plane_cone: float = math.radians(20.0)
@@ -385,6 +419,15 @@ class ServoParams:
             raise ValueError(f"bandwidth must be >= 2, got {self.bandwidth}")
         if self.max_iterations < 1:
             raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if self.relocalize_interval < 1:
+            raise ValueError(
+                f"relocalize_interval must be >= 1 step, got {self.relocalize_interval}"
+            )
+        if not 1 <= self.relocalize_retry <= self.relocalize_interval:
+            raise ValueError(
+                f"relocalize_retry must be in [1, relocalize_interval = "
+                f"{self.relocalize_interval}] steps, got {self.relocalize_retry}"
+            )
         if self.min_points < 1:
             raise ValueError(f"min_points must be >= 1, got {self.min_points}")
         if not (self.max_outage >= 0 and math.isfinite(self.max_outage)):
@@ -491,6 +534,9 @@ class ServoRecord:
         Factor in (0, 1] the twist was scaled by to meet the speed limits.
     seconds : float
         Wall time of the step (registration and control law), s.
+    cpu_seconds : float
+        CPU time of the process during the step (``time.process_time``), s: what a busy
+        machine does not inflate as it does the wall time.
     status : ServoStatus
         The outcome of the step.
     q, q_dot : ndarray or None
@@ -525,6 +571,17 @@ class ServoRecord:
         The step started from a global registration (``ServoParams.relocalize``).
     relocalization_score : float
         Support score of the global registration tried this step (NaN when none was).
+    relocalization_prior : bool
+        The global registration kept the servo's own estimate (its prior, refined) over
+        every searched pose.
+    confidence : float
+        The registration's fitness over the part of the reference that its estimate puts
+        inside the current view's field, in [0, 1] (``ServoParams.relocalize_fitness``);
+        NaN when no registration ran.
+    carried : bool
+        The estimate is the last accepted one carried along the camera's measured motion,
+        not the registration's: after a relocalization and before lock-on (a fitness of
+        ``watchdog_fitness``), where the views share too little for Algorithm 1's step.
     """
 
     step: int
@@ -555,6 +612,10 @@ class ServoRecord:
     hidden_share: float = 0.0
     relocalized: bool = False
     relocalization_score: float = math.nan
+    relocalization_prior: bool = False
+    confidence: float = math.nan
+    carried: bool = False
+    cpu_seconds: float = 0.0
 
 
 @dataclass
@@ -645,6 +706,36 @@ def _converged_status(translation: float, rotation: float) -> ServoStatus:
         "converged",
         f"estimated error {1000 * translation:.2f} mm, {math.degrees(rotation):.3f} deg",
     )
+
+
+def field_share(
+    reference_points: np.ndarray,
+    T_current_reference: np.ndarray,
+    current_points: np.ndarray,
+    max_depth: float = math.inf,
+) -> float:
+    """The share of ``reference_points`` that ``T_current_reference`` puts inside the
+    current view's field: in front of the camera, nearer than ``max_depth`` and within the
+    bounds of the current points' x/z and y/z (a pinhole camera's image rectangle, as far as
+    the view has returns), in [0, 1]. Occlusion is ignored."""
+    reference = np.asarray(reference_points, dtype=float)
+    current = np.asarray(current_points, dtype=float)
+    if len(reference) == 0 or len(current) == 0:
+        return 0.0
+    current = current[:: max(1, len(current) // _FIELD_POINTS)]
+    current = current[current[:, 2] > _FIELD_NEAR]
+    if len(current) == 0:
+        return 0.0
+    u = current[:, 0] / current[:, 2]
+    v = current[:, 1] / current[:, 2]
+    T = np.asarray(T_current_reference, dtype=float)
+    moved = reference @ T[:3, :3].T + T[:3, 3]
+    z = moved[:, 2]
+    front = (z > _FIELD_NEAR) & (z <= max_depth)
+    z = np.where(front, z, 1.0)
+    mu, mv = moved[:, 0] / z, moved[:, 1] / z
+    inside = front & (mu >= u.min()) & (mu <= u.max()) & (mv >= v.min()) & (mv <= v.max())
+    return float(inside.mean())
 
 
 def dominant_normal(normals: np.ndarray, cone: float) -> tuple[np.ndarray, float]:
@@ -850,6 +941,8 @@ class SpectralServo:
         self._steps = 0
         self._anchored = False  # a global registration was taken: registrations warm-start
         self._lost = True  # no trusted estimate: the next step relocalizes
+        self._since_relocalization: int | None = None  # steps since the last attempt
+        self._confirmed = False  # the last relocalization was taken and confirmed
         self._reset_faults()
 
     def _reset_faults(self) -> None:
@@ -888,6 +981,8 @@ class SpectralServo:
         self._last_turn = 0.0
         self._anchored = False
         self._lost = True
+        self._since_relocalization = None
+        self._confirmed = False
         self._reset_faults()
 
     @property
@@ -1017,6 +1112,19 @@ class SpectralServo:
         stamp: float | None = None,
     ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
         """:meth:`step` with its :class:`ServoRecord`."""
+        cpu = time.process_time()
+        twist, status, record = self._step_record(current, T_previous_current, now, stamp)
+        record.cpu_seconds = time.process_time() - cpu
+        return twist, status, record
+
+    def _step_record(
+        self,
+        current: CloudLike,
+        T_previous_current: np.ndarray | None,
+        now: float | None,
+        stamp: float | None,
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """:meth:`step_record` without its CPU time."""
         start = time.perf_counter()
         now = time.monotonic() if now is None else float(now)
         p = self.params
@@ -1061,29 +1169,48 @@ class SpectralServo:
                     )
                     return self._hold(record, "occluded", message, now, start)
 
-        if p.relocalize and self._lost:
-            self._relocalize(cloud, record)
+        if self._since_relocalization is not None:
+            self._since_relocalization += 1
+        if p.relocalize and self._lost and self._relocalization_due():
+            self._relocalize(cloud, record, motion)
             motion = self._motion
         guess = None
         if (p.warm_start or self._anchored) and self._previous is not None:
             guess = self._predicted(motion)
-        tracking = self._can_track(guess, motion)
+        # A relocalized step checks the global pose on the full grid once.
+        tracking = not record.relocalized and self._can_track(guess, motion)
         if tracking:
             assert self._tracking_aligner is not None
             T, result = self._estimate(cloud, guess, self._tracking_aligner)
-            # A poor fit may mean the answer lies beyond the tracking bound (the camera or
-            # the scene jumped): the full search decides, and the watchdog sees the jump.
-            tracking = result.fitness >= p.watchdog_fitness
+            # Once locked on, a poor fit may mean the answer lies beyond the tracking bound
+            # (the camera or the scene jumped): the full search decides, and the watchdog
+            # sees the jump. Before, a poor fit is the relocalization's to judge.
+            tracking = not self._armed or result.fitness >= p.watchdog_fitness
         if not tracking:
             T, result = self._estimate(cloud, guess, self._aligner)
         record.tracking = tracking
         last = result.history[-1] if len(result.history) else None
+        record.fitness = float(result.fitness)
+        # fitness / share >= fitness: the share is needed only under the threshold.
+        record.confidence = (
+            min(1.0, record.fitness)
+            if record.fitness >= p.relocalize_fitness
+            else self._confidence(T, record.fitness, cloud)
+        )
+        if self._anchored and not self._armed and guess is not None:
+            # Before lock-on the views share too little for Algorithm 1's step: the EGI
+            # correlation of two partial views peaks 10-20 degrees off the truth, and
+            # steps toward it drift away from a right global estimate. The last good
+            # estimate carried along the camera's measured motion is the estimate until
+            # the registration locks on (fitness watchdog_fitness).
+            record.carried = record.fitness < p.watchdog_fitness
+            if record.carried:
+                T = guess
         t_err, r_err = pose_error(T)
         record.T_current_desired = T
         record.translation_error, record.rotation_error = t_err, r_err
         record.iterations = int(result.iterations)
-        record.plane_turn = self._last_turn
-        record.fitness = float(result.fitness)
+        record.plane_turn = 0.0 if record.carried else self._last_turn
         if last is not None:
             record.translation_cost = float(last.translation_cost)
             record.rotation_cost = float(last.rotation_cost)
@@ -1112,7 +1239,9 @@ class SpectralServo:
         self._motion = np.eye(4)
         self._outage_start = now
         self._armed = self._armed or record.fitness >= p.watchdog_fitness
-        self._lost = record.fitness < p.relocalize_fitness
+        self._lost = not record.confidence >= p.relocalize_fitness
+        if record.relocalized:
+            self._confirmed = not self._lost
 
         if self._converged(record):
             record.status = _converged_status(t_err, r_err)
@@ -1121,11 +1250,40 @@ class SpectralServo:
         record.seconds = time.perf_counter() - start
         return record.twist, record.status, record
 
-    def _relocalize(self, cloud: PointCloud, record: ServoRecord) -> None:
-        """The global registration of the reference onto ``cloud`` (cropped, as captured):
-        taken as the previous estimate when its support reaches ``relocalize_score``."""
-        result = _align_views(self._reference_view, cloud, self._view_params)
+    def _relocalization_due(self) -> bool:
+        """Whether a relocalization may run now: none was tried yet, or the last was
+        ``relocalize_interval`` steps ago (``relocalize_retry`` when it was not confirmed)."""
+        since = self._since_relocalization
+        p = self.params
+        return since is None or since >= (
+            p.relocalize_interval if self._confirmed else p.relocalize_retry
+        )
+
+    def _confidence(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
+        """``fitness`` over the share of the reference that ``T`` puts inside the field of
+        ``cloud`` (its points' bounds in x/z and y/z, nearer than ``max_depth``; at least
+        ``_MIN_FIELD_SHARE``), in [0, 1]."""
+        share = field_share(
+            self._occlusion_reference, T, np.asarray(cloud.points), self.params.max_depth
+        )
+        # An estimate that puts the reference out of the field is not trusted for fitting
+        # the little it leaves in view.
+        return float(min(1.0, fitness / max(share, _MIN_FIELD_SHARE)))
+
+    def _relocalize(
+        self, cloud: PointCloud, record: ServoRecord, motion: np.ndarray | None
+    ) -> None:
+        """The global registration of the reference onto ``cloud`` (cropped, as captured),
+        with the estimate carried along ``motion`` as its prior once one was taken: taken as the
+        previous estimate when its support reaches ``relocalize_score``."""
+        # The estimate carried so far, if a global registration was taken before (an
+        # estimate of the local step alone far from the goal is no prior worth refining).
+        prior = None if self._previous is None or not self._anchored else self._predicted(motion)
+        self._since_relocalization = 0
+        self._confirmed = False
+        result = _align_views(self._reference_view, cloud, self._view_params, prior)
         record.relocalization_score = float(result.support.score)
+        record.relocalization_prior = prior is not None and result.hypothesis == -1
         if result.support.score < self.params.relocalize_score:
             return
         record.relocalized = True
@@ -1194,11 +1352,13 @@ class SpectralServo:
         return record.twist, record.status, record
 
     def _can_track(self, guess: np.ndarray | None, motion: np.ndarray | None) -> bool:
-        """Whether this registration may seek only ``tracking_translation``: locked on, and
+        """Whether this registration may seek only ``tracking_translation``: locked on (the
+        watchdog armed, or a relocalization taken), and
         the predicted estimate moves the reference's centroid by at most half of it from
         the registration's start ``guess`` (identity when None); ``motion`` as for
         :meth:`_predicted`."""
-        if self._tracking_aligner is None or not self._armed or self._previous is None:
+        locked = self._armed or self._anchored
+        if self._tracking_aligner is None or not locked or self._previous is None:
             return False
         predicted = self._predicted(motion)
         start = np.eye(4) if guess is None else np.asarray(guess, dtype=float)
@@ -1224,7 +1384,7 @@ class SpectralServo:
         assert self._previous is not None
         if motion is None:
             return self._previous
-        return np.linalg.inv(np.asarray(motion, dtype=float)) @ self._previous
+        return _rigid_inverse(np.asarray(motion, dtype=float)) @ self._previous
 
     def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
         """A message when ``T`` is implausibly far from the previous estimate carried along
@@ -1233,7 +1393,7 @@ class SpectralServo:
             return None
         predicted = self._predicted(motion)
         # |translation| of predicted^-1 T is |t - t_predicted|: the two parts are independent.
-        moved, turned = pose_error(np.linalg.inv(predicted) @ T)
+        moved, turned = pose_error(_rigid_inverse(predicted) @ T)
         p = self.params
         if moved > p.jump_limit_translation or turned > p.jump_limit_rotation:
             return (

@@ -40,6 +40,7 @@ def align_views(
     *,
     current_viewpoint: Any = (0.0, 0.0, 0.0),
     reference_viewpoint: Any = (0.0, 0.0, 0.0),
+    prior: Any = None,
     **overrides: Any,
 ) -> ViewAlignResult:
     """Register the ``reference`` view onto the ``current`` view of the same scene.
@@ -57,6 +58,10 @@ def align_views(
         depth camera's cloud in its own frame. The support check renders from it.
     reference_viewpoint : array_like (3,)
         The reference view's sensor origin, metres; used only to orient estimated normals.
+    prior : array_like (4, 4), optional
+        A ``T_current_reference`` known from elsewhere (a tracker's estimate): refined and
+        scored beside the search's hypotheses, and returned (``hypothesis`` -1) unless a
+        searched pose is better supported.
     **overrides
         Any :class:`ViewAlignParams` field, e.g. ``hypotheses=24, voxel_size=0.02``.
 
@@ -73,7 +78,8 @@ def align_views(
     ValueError
         For an empty view, an array of the wrong shape, non-finite coordinates, a
         viewpoint that is not 3 finite numbers, an unknown or out-of-range setting, or a
-        grid over ``max_voxels``; the message names the argument. Views that share no
+        grid over ``max_voxels``, a prior that is not a rigid 4 x 4 transform; the message
+        names the argument. Views that share no
         surface are not an error: the result's ``status`` is ``"no_support"``.
     TypeError
         For ``params`` that is not a :class:`ViewAlignParams`.
@@ -83,4 +89,4 @@ def align_views(
     settings.current_viewpoint = current_origin
     reference_view = _view(reference, "reference", check_viewpoint(reference_viewpoint))
     current_view = _view(current, "current", current_origin)
-    return _align_views(reference_view, current_view, settings)
+    return _align_views(reference_view, current_view, settings, prior)

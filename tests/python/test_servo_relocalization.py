@@ -4,10 +4,19 @@ from a large start of the seeded set that the local servo alone does not recover
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
-from spectral_vs.servo import ServoParams, SpectralServo, pose_error, run_servo, start_poses
+from spectral_vs.servo import (
+    ServoParams,
+    SpectralServo,
+    field_share,
+    pose_error,
+    run_servo,
+    start_poses,
+)
 
 sim = pytest.importorskip("spectral_vs.sim")
 
@@ -68,3 +77,63 @@ def test_relocalization_settings_are_checked():
         ServoParams(relocalize_fitness=1.5)
     with pytest.raises(ValueError, match="relocalize_score must be in"):
         ServoParams(relocalize_score=-0.1)
+    with pytest.raises(ValueError, match="relocalize_interval must be >= 1"):
+        ServoParams(relocalize_interval=0)
+    with pytest.raises(ValueError, match="relocalize_retry must be in"):
+        ServoParams(relocalize_interval=4, relocalize_retry=5)
+    with pytest.raises(ValueError, match="relocalize_retry must be in"):
+        ServoParams(relocalize_retry=0)
+
+
+def test_field_share_counts_what_lies_in_the_views_field():
+    # The current view: a plane at z = 1 m filling x, y in [-0.5, 0.5] (x/z, y/z within
+    # +-0.5). The reference: points at z = 1 m, x in [-1, 1]: half of them inside.
+    grid = np.linspace(-0.5, 0.5, 41)
+    xs, ys = np.meshgrid(grid, grid)
+    current = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    x = np.linspace(-1.0, 1.0, 200, endpoint=False) + 0.005
+    reference = np.column_stack([x, np.zeros_like(x), np.ones_like(x)])
+    assert field_share(reference, np.eye(4), current) == pytest.approx(0.5, abs=0.01)
+    # Moved 1 m sideways (x from 0 to 2): a quarter inside.
+    shifted = np.eye(4)
+    shifted[0, 3] = 1.0
+    assert field_share(reference, shifted, current) == pytest.approx(0.25, abs=0.01)
+    # Behind the camera, or beyond max_depth: none.
+    behind = np.diag([1.0, 1.0, -1.0, 1.0])
+    behind[:3, :3] = np.diag([-1.0, 1.0, -1.0])  # a rotation by pi about y
+    assert field_share(reference, behind, current) == 0.0
+    assert field_share(reference, np.eye(4), current, max_depth=0.9) == 0.0
+    assert field_share(reference[:0], np.eye(4), current) == 0.0
+
+
+def test_relocalizations_are_spaced_out(large_start):
+    # No global registration is taken (relocalize_score 1): every attempt is unconfirmed,
+    # and the next comes relocalize_retry steps later, not at every step.
+    params = ServoParams(relocalize_score=1.0, relocalize_retry=3, relocalize_interval=6)
+    log, _ = run(large_start, params, max_steps=12)
+    attempts = [r.step for r in log.records if not np.isnan(r.relocalization_score)]
+    assert attempts[0] == 0 and len(attempts) >= 2
+    assert not any(r.relocalized or r.carried for r in log.records)
+    for before, after in itertools.pairwise(attempts):
+        assert after - before >= params.relocalize_retry
+        # ... and only while lost: a confidence under relocalize_fitness the step before.
+        assert log.records[after - 1].confidence < params.relocalize_fitness
+
+
+def test_the_relocalized_estimate_is_carried_until_lock_on(large_start):
+    # From the large start the global registration is taken at the first step; until the
+    # registration locks on, the estimate is that pose carried along the camera's motion,
+    # which the simulation's truth confirms at every such step (within 10 mm, 3 degrees).
+    _, _, T_world_reference, _ = large_start
+    log, (t_mm, r_deg) = run(large_start, ServoParams(), max_steps=80)
+    assert log.records[0].relocalized and log.records[0].carried
+    carried = [r for r in log.records if r.carried]
+    assert len(carried) >= 5
+    for record in carried:
+        T_true = np.linalg.inv(np.asarray(record.T_base_camera)) @ T_world_reference
+        err_mm, err_deg = errors_mm_deg(record.T_current_desired, T_true)
+        assert err_mm < 10.0 and err_deg < 3.0
+    # Once locked on, the registration's own estimate, and the run converges.
+    assert not log.records[-1].carried and log.records[-1].fitness >= 0.9
+    assert log.converged and t_mm < 2.0 and r_deg < 0.5
+    assert sum(r.relocalized for r in log.records) == 1

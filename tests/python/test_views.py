@@ -121,3 +121,40 @@ def test_views_that_share_nothing_say_so(table_pairs):
     result = svs.align_views(pair.reference, away)
     assert result.status == "no_support" and not result.converged
     assert result.support.confirmed == 0
+
+
+def test_a_prior_is_kept_when_right_and_replaced_when_wrong(table_pairs):
+    pair = table_pairs[2]
+    truth = pair.T_current_reference
+    # The truth moved by 3 mm as the prior: its refinement is kept (hypothesis -1) and
+    # lands on the truth; the search's hypotheses are still reported.
+    near = truth.copy()
+    near[:3, 3] += np.array([0.003, 0.0, 0.0])
+    kept = svs.align_views(
+        pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, prior=near
+    )
+    assert kept.hypothesis == -1
+    assert rotation_error_deg(truth, kept.T_current_reference) < 0.5
+    assert np.linalg.norm(kept.T_current_reference[:3, 3] - truth[:3, 3]) < 0.002  # m
+    assert len(kept.hypotheses) == 16
+    # A prior turned 90 degrees away about the optical axis: a searched pose is better
+    # supported, and the result is the truth again.
+    turn = np.eye(4)
+    turn[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    wrong = svs.align_views(
+        pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, prior=turn @ truth
+    )
+    assert wrong.hypothesis >= 0
+    assert rotation_error_deg(truth, wrong.T_current_reference) < 0.5
+    assert np.linalg.norm(wrong.T_current_reference[:3, 3] - truth[:3, 3]) < 0.002  # m
+    # Without a prior, the same pose as the search alone gives.
+    alone = svs.align_views(pair.reference, pair.current, current_viewpoint=pair.current_viewpoint)
+    np.testing.assert_allclose(wrong.T_current_reference, alone.T_current_reference, atol=1e-12)
+
+
+def test_a_prior_that_is_not_rigid_names_the_argument(table_pairs):
+    pair = table_pairs[0]
+    with pytest.raises(ValueError, match="prior"):
+        svs.align_views(pair.reference, pair.current, prior=2.0 * np.eye(4))
+    with pytest.raises(ValueError, match="prior"):
+        svs.align_views(pair.reference, pair.current, prior=np.eye(3))

@@ -438,8 +438,9 @@ ViewSupport view_support(const PointCloud& reference_view, const PointCloud& cur
 }
 
 ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& current_view,
-                            const ViewAlignParams& params) {
+                            const ViewAlignParams& params, const std::optional<Transform>& prior) {
   check_views(reference_view, current_view, params);
+  if (prior) require_rigid_transform(*prior, "prior");
   const Clock::time_point started = Clock::now();
   const ViewScale scale = scale_of(reference_view, current_view, params);
   const AlignParams loop = loop_params(params, scale);
@@ -486,9 +487,21 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
   ViewAlignResult best;
   const int runs = std::min<int>(params.refinements, int(ranked.size()));
   bool in_time = true;
+  bool any = false;
+  if (prior) {
+    // The prior first: a searched pose must be better supported to replace it.
+    Hypothesis given;
+    given.index = -1;
+    given.pose = model.pose_of(*prior);
+    given.support = support.of(*prior, kCoarseTolerance);
+    best = refine(views, given);
+    any = true;
+    in_time = !expired(views);
+  }
   for (int i = 0; i < runs && in_time; ++i) {
     ViewAlignResult result = refine(views, ranked[std::size_t(i)]);
-    if (i == 0 || result.support.score > best.support.score) best = std::move(result);
+    if (!any || result.support.score > best.support.score) best = std::move(result);
+    any = true;
     in_time = !expired(views);
   }
   const bool searched = in_time && int(ranked.size()) == params.hypotheses;

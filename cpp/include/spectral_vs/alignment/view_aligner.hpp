@@ -100,7 +100,8 @@ struct ViewAlignResult {
   ViewSupport support;                                   ///< Of the returned pose.
   double correlation = 0.0;  ///< Normalised EGI correlation at the returned rotation.
   ViewScale scale;           ///< The scale it worked at.
-  int hypothesis = 0;        ///< Index of the kept hypothesis (best correlated first).
+  int hypothesis = 0;        ///< Index of the kept hypothesis (best correlated first); -1: the
+                             ///< prior pose given to align_views.
   int icp_iterations = 0;    ///< ICP steps of the kept pose (0 without, or not kept).
   /// The checked hypotheses, best score first: T_current_reference and support.
   std::vector<std::pair<Transform, ViewSupport>> hypotheses;
@@ -119,10 +120,15 @@ ViewSupport view_support(const PointCloud& reference, const PointCloud& current,
 /// the views' EGIs) and translation (phase correlation over both views), each of the
 /// best-supported hypotheses refined by Algorithm 1 on the views and a point-to-plane ICP.
 /// Views that share no surface are not an error: status says no_support.
+/// A `prior` (a pose known from elsewhere, e.g. a tracker's estimate) is refined and
+/// scored beside the search's best hypotheses, as one more of them: the result is the
+/// prior's refinement (`hypothesis` -1) unless a searched pose is better supported. A
+/// relocalization thus never replaces a right estimate by a worse-supported one.
 /// @throws std::invalid_argument for an empty view, missing normals, non-finite or
-///         out-of-range settings, a grid over params.limits, or a current view with no
-///         point in front of current_viewpoint.
+///         out-of-range settings, a grid over params.limits, a current view with no
+///         point in front of current_viewpoint, or a prior that is not rigid.
 ViewAlignResult align_views(const PointCloud& reference, const PointCloud& current,
-                            const ViewAlignParams& params = {});
+                            const ViewAlignParams& params = {},
+                            const std::optional<Transform>& prior = std::nullopt);
 
 }  // namespace spectral_vs
