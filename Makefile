@@ -56,7 +56,7 @@ test-tsan: system-deps venv
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" SPECTRAL_VS_DATA=$(abspath $(DATA)) ctest --preset tsan
 
 # libFuzzer (Clang 14, ASan + UBSan) on the PCD and PLY readers, the URDF-to-chain path
-# of Kinematics and align(), FUZZ_SECONDS each, in build/fuzz (preset "fuzz"); corpora
+# of Kinematics, align() and cloud_from_depth, FUZZ_SECONDS each, in build/fuzz (preset "fuzz"); corpora
 # seeded from $(DATA) and small generated files, kept between runs. Any crash, sanitizer
 # report, uncaught exception or hang fails it (fuzz/run_fuzzers.sh, docs/reliability.md).
 FUZZ_SECONDS ?= 60

@@ -1,10 +1,10 @@
-// Writes the fuzzers' seed corpora into OUT/{pcd,ply,urdf,align}:
+// Writes the fuzzers' seed corpora into OUT/{pcd,ply,urdf,align,depth}:
 //   fuzz_seeds OUT DATA_DIR [URDF:BASE:TIP ...]
 // PCD: small clouds (with and without normals) in each encoding, an organized ASCII
 // cloud with NaN pixels, and for every scan in DATA_DIR its first 4 KB as they are plus
 // its first 150 points re-saved in each encoding. PLY: small clouds binary (as
 // save_cloud writes them), ASCII and big-endian by hand. URDF: "BASE\nTIP\n" and the XML
-// of each given file. align: random byte strings.
+// of each given file. align and depth: random byte strings.
 
 #include <spectral_vs/representation/cloud_io.hpp>
 
@@ -66,7 +66,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path out = argv[1], data = argv[2];
-  for (const char* name : {"pcd", "ply", "urdf", "align"}) fs::create_directories(out / name);
+  for (const char* name : {"pcd", "ply", "urdf", "align", "depth"})
+    fs::create_directories(out / name);
 
   // PCD
   save_pcds(out / "pcd", "normals", small_cloud(40, true, 1));
@@ -136,6 +137,13 @@ int main(int argc, char** argv) {
     std::string bytes(std::size_t(64 + 40 * i), '\0');
     for (char& c : bytes) c = static_cast<char>(rng() & 0xff);
     write(out / "align" / ("random_" + std::to_string(i)), bytes);
+  }
+
+  // depth: random bytes too (the target reads sizes, camera and settings from them)
+  for (int i = 0; i < 8; ++i) {
+    std::string bytes(std::size_t(256 + 1024 * i), '\0');
+    for (char& c : bytes) c = static_cast<char>(rng() & 0xff);
+    write(out / "depth" / ("random_" + std::to_string(i)), bytes);
   }
   std::cout << "seeds in " << out.string() << " (" << scans << " scans of " << data.string()
             << ")\n";
