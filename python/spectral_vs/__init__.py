@@ -64,6 +64,12 @@ from spectral_vs._core import (
     wigner_generators,
     wigner_real,
 )
+from spectral_vs._core import (
+    SINGLE_VIEW_THRESHOLD,
+    SingleViewEvidence,
+    alignment_voxel_size,
+    detect_single_view,
+)
 from spectral_vs.registration import align
 from spectral_vs.robot import RobotInterface
 from spectral_vs.servo import (
@@ -163,6 +169,10 @@ __all__ = [
     "sphere_grid",
     "translation_cost",
     "view_scale",
+    "SINGLE_VIEW_THRESHOLD",
+    "SingleViewEvidence",
+    "alignment_voxel_size",
+    "detect_single_view",
     "view_support",
     "voxel_downsample",
     "voxelize",
