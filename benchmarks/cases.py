@@ -536,7 +536,8 @@ def in_camera_frame(case: Case) -> Case:
         model_center=apply(T_cw, case.model_center[None])[0],
         symmetries=np.array([T_cw @ S @ T_wc for S in case.symmetries]),
         viewpoint=np.zeros(3),
-        info=case.info | {"T_scene_object": (T_cw @ np.asarray(case.info["T_scene_object"])).tolist()},
+        info=case.info
+        | {"T_scene_object": (T_cw @ np.asarray(case.info["T_scene_object"])).tolist()},
     )
 
 

@@ -174,8 +174,7 @@ max_voxels : int
       .def_readwrite("window_margin", &AlignParams::window_margin)
       .def_readwrite("max_translation", &AlignParams::max_translation)
       .def_property(
-          "sensor_origin",
-          [](const AlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
+          "sensor_origin", [](const AlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
           [](AlignParams& p, const Eigen::Vector3d& origin) { p.sensor_origin = origin; })
       .def_property(
           "scene_view", [](const AlignParams& p) { return choice_name(p.scene_view, kSceneViews); },

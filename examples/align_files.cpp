@@ -156,8 +156,10 @@ int main(int argc, char** argv) {
 
   try {
     spectral_vs::CloudFileInfo model_info, scene_info;
-    const spectral_vs::PointCloud raw_model = spectral_vs::load_cloud(options.model_path, &model_info);
-    const spectral_vs::PointCloud raw_scene = spectral_vs::load_cloud(options.scene_path, &scene_info);
+    const spectral_vs::PointCloud raw_model =
+        spectral_vs::load_cloud(options.model_path, &model_info);
+    const spectral_vs::PointCloud raw_scene =
+        spectral_vs::load_cloud(options.scene_path, &scene_info);
     options.params.sensor_origin = options.viewpoint;
     if (!options.voxel_given)
       options.params.voxel_size = spectral_vs::alignment_voxel_size(raw_model, raw_scene);

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 
 from spectral_vs._core import (
+    SINGLE_VIEW_THRESHOLD,
     AlignIteration,
     AlignParams,
     AlignResult,
@@ -25,6 +26,7 @@ from spectral_vs._core import (
     PhaseCorrelation,
     PointCloud,
     RotationRefineResult,
+    SingleViewEvidence,
     So3Correlation,
     TranslationEstimate,
     VelocityCommand,
@@ -34,7 +36,9 @@ from spectral_vs._core import (
     ViewScale,
     ViewSupport,
     VoxelGrid,
+    alignment_voxel_size,
     damped_least_squares,
+    detect_single_view,
     egi,
     egi_cell,
     egi_coefficients,
@@ -63,12 +67,6 @@ from spectral_vs._core import (
     voxelize,
     wigner_generators,
     wigner_real,
-)
-from spectral_vs._core import (
-    SINGLE_VIEW_THRESHOLD,
-    SingleViewEvidence,
-    alignment_voxel_size,
-    detect_single_view,
 )
 from spectral_vs.registration import align
 from spectral_vs.robot import RobotInterface
@@ -114,6 +112,7 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
 
 __all__ = [
+    "SINGLE_VIEW_THRESHOLD",
     "AlignIteration",
     "AlignParams",
     "AlignResult",
@@ -131,6 +130,7 @@ __all__ = [
     "ServoParams",
     "ServoRecord",
     "ServoStatus",
+    "SingleViewEvidence",
     "So3Correlation",
     "SpectralServo",
     "TranslationEstimate",
@@ -143,7 +143,9 @@ __all__ = [
     "VoxelGrid",
     "align",
     "align_views",
+    "alignment_voxel_size",
     "damped_least_squares",
+    "detect_single_view",
     "egi",
     "egi_cell",
     "egi_coefficients",
@@ -169,10 +171,6 @@ __all__ = [
     "sphere_grid",
     "translation_cost",
     "view_scale",
-    "SINGLE_VIEW_THRESHOLD",
-    "SingleViewEvidence",
-    "alignment_voxel_size",
-    "detect_single_view",
     "view_support",
     "voxel_downsample",
     "voxelize",

@@ -311,8 +311,10 @@ TEST(InitialGuess, ANeighbourhoodPicksTheGuessedOfTwoCopies) {
   std::mt19937 rng(41);
   const PointCloud model = box_with_ball(5000, rng);
   Transform A = Transform::Identity(), B = Transform::Identity();
-  A.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
-  B.topLeftCorner<3, 3>() = Eigen::AngleAxisd(2.0, Eigen::Vector3d(-1, 0, 2).normalized()).toRotationMatrix();
+  A.topLeftCorner<3, 3>() =
+      Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  B.topLeftCorner<3, 3>() =
+      Eigen::AngleAxisd(2.0, Eigen::Vector3d(-1, 0, 2).normalized()).toRotationMatrix();
   B.topRightCorner<3, 1>() << 0.5, 0.1, 0.0;
   const PointCloud a = box_with_ball(5000, rng).transformed(A);
   const PointCloud b = box_with_ball(5000, rng).transformed(B);
@@ -367,7 +369,8 @@ TEST(AlignResult, HistoryDescribesTheReturnedPose) {
       EXPECT_LT(translation_error_mm(result.history.back().T_scene_model, result.T_scene_model),
                 1e-9);
       const AlignIteration& last = result.history.back();
-      EXPECT_EQ(result.converged, last.translation_step + last.rotation_gradient < params.tolerance);
+      EXPECT_EQ(result.converged,
+                last.translation_step + last.rotation_gradient < params.tolerance);
     }
   }
 }

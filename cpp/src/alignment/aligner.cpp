@@ -711,12 +711,12 @@ void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses
   guess.fitness = problem.model.fitness(problem.scene, problem.view, guess.pose, tolerance);
   const Eigen::Vector3d centre = problem.model.centre(guess.pose);
   const auto outside = [&](const Hypothesis& h) {
-    return (params.guess_angle_deg > 0.0 && turn_deg(h.pose.R, guess.pose.R) > params.guess_angle_deg) ||
+    return (params.guess_angle_deg > 0.0 &&
+            turn_deg(h.pose.R, guess.pose.R) > params.guess_angle_deg) ||
            (params.guess_distance > 0.0 &&
             (problem.model.centre(h.pose) - centre).norm() > params.guess_distance);
   };
-  hypotheses.erase(std::remove_if(hypotheses.begin(), hypotheses.end(), outside),
-                   hypotheses.end());
+  hypotheses.erase(std::remove_if(hypotheses.begin(), hypotheses.end(), outside), hypotheses.end());
   hypotheses.push_back(guess);
   rank(hypotheses);
 }
@@ -790,16 +790,9 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   };
 
   if (!params.global_search) {
-    const Problem problem{scene_map,
-                          view_ptr,
-                          moving,
-                          model_coefficients,
-                          params,
-                          window_margin(0.0, params),
-                          deadline,
-                          std::nullopt,
-                          true,
-                          viewpoint};
+    const Problem problem{
+        scene_map, view_ptr,     moving, model_coefficients, params, window_margin(0.0, params),
+        deadline,  std::nullopt, true,   viewpoint};
     const Pose start = moving.pose_of(params.initial_guess);
     SceneTranslation whole_scene =
         params.max_translation > 0.0
@@ -816,9 +809,9 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis = flat_axis(model_coefficients, params.bandwidth);
   const bool dense = points_per_voxel(model.points(), params.voxel_size) >= kPolishMinDensity;
-  const Problem problem{scene_map, view_ptr, moving, model_coefficients,
-                        params,    window_margin(search_voxel, params),
-                        deadline,  axis,     dense,  viewpoint};
+  const Problem problem{
+      scene_map, view_ptr, moving, model_coefficients, params, window_margin(search_voxel, params),
+      deadline,  axis,     dense,  viewpoint};
   std::optional<TranslationWindow> window;
   std::vector<std::vector<Eigen::Index>> parts;
   if (plane) {
@@ -839,7 +832,8 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   }
   // The refined hypotheses: the fittest, and with a neighbourhood always the guess.
   std::vector<const Hypothesis*> refined;
-  const std::size_t runs = std::min<std::size_t>(std::size_t(params.refinements), hypotheses.size());
+  const std::size_t runs =
+      std::min<std::size_t>(std::size_t(params.refinements), hypotheses.size());
   for (std::size_t i = 0; i < runs; ++i) refined.push_back(&hypotheses[i]);
   if (has_neighbourhood(params)) {
     const auto guess = std::find_if(hypotheses.begin(), hypotheses.end(),

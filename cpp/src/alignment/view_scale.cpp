@@ -58,8 +58,8 @@ ViewScale view_scale(const PointCloud& reference, const PointCloud& current, dou
   if (!(voxels_across >= 4.0 && std::isfinite(voxels_across)))
     detail::fail("voxels_across must be finite and >= 4, got ", voxels_across);
   ViewScale scale;
-  scale.extent = std::max(detail::typical_size(reference.points()),
-                          detail::typical_size(current.points()));
+  scale.extent =
+      std::max(detail::typical_size(reference.points()), detail::typical_size(current.points()));
   if (!(scale.extent > 0.0))
     detail::fail("reference, current: the views span no volume (all points at one place)");
   const double points = double(std::min(reference.size(), current.size()));

@@ -198,7 +198,7 @@ struct AlignResult {
   /// Every iteration of that run; history.back().T_scene_model is where Algorithm 1
   /// ended, T_scene_model that pose after the polish and ICP (equal without them).
   std::vector<AlignIteration> history;
-  double voxel_size = 0.0;  ///< The voxel the alignment worked at, metres (derived for 0).
+  double voxel_size = 0.0;   ///< The voxel the alignment worked at, metres (derived for 0).
   bool single_view = false;  ///< The scene was checked as a single view from sensor_origin
                              ///< (declared, or detected: `detect_single_view`).
 };
