@@ -32,6 +32,7 @@ scaled to household sizes; the real scans are read from ``$SPECTRAL_VS_DATA`` or
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -551,6 +552,31 @@ def pose_error(case: Case, T: np.ndarray) -> tuple[float, float]:
         rotation_angle_deg(T[:3, :3].T @ case.T_true[:3, :3] @ S[:3, :3]) for S in case.symmetries
     )
     return rotation, translation
+
+
+def in_camera_frame(case: Case) -> Case:
+    """The case in its camera's frame (Z forward, sensor at the origin), as a depth camera
+    delivers its scan: scene and model both moved by ``T_camera_world`` (so the model
+    still starts the cell's angle and offset from the truth), ``T_true``, the symmetries
+    and the viewpoint conjugated; every error is unchanged. Cases without a camera
+    (synthetic copies, and the real scans, already in their sensor's frame) as they are."""
+    if "T_world_camera" not in case.info:
+        return case
+    T_cw = np.linalg.inv(np.asarray(case.info["T_world_camera"], dtype=float))
+    T_wc = np.asarray(case.info["T_world_camera"], dtype=float)
+    return dataclasses.replace(
+        case,
+        model_points=np.ascontiguousarray(apply(T_cw, case.model_points)),
+        model_normals=np.ascontiguousarray(case.model_normals @ T_cw[:3, :3].T),
+        scene_points=np.ascontiguousarray(apply(T_cw, case.scene_points)),
+        scene_normals=np.ascontiguousarray(case.scene_normals @ T_cw[:3, :3].T),
+        T_true=T_cw @ case.T_true @ T_wc,
+        model_center=apply(T_cw, case.model_center[None])[0],
+        symmetries=np.array([T_cw @ S @ T_wc for S in case.symmetries]),
+        viewpoint=np.zeros(3),
+        info=case.info
+        | {"T_scene_object": (T_cw @ np.asarray(case.info["T_scene_object"])).tolist()},
+    )
 
 
 def save_case(case: Case, path: Path) -> None:

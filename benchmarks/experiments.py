@@ -76,10 +76,9 @@ def failure_kind(rotation_deg: float, translation_m: float) -> str:
 
 
 def run_case(case: case_lib.Case, mode: str, keep_history: bool) -> dict:
+    # The defaults: the scans come in their camera's frame (case_lib.in_camera_frame), from
+    # which align() detects a single view itself, and the voxel is derived from the model.
     settings = dict(MODES[mode])
-    if mode == "ours" and np.all(np.isfinite(case.viewpoint)):
-        # A single-view scan: its sensor origin is known, as with any real scan.
-        settings["scene_viewpoint"] = case.viewpoint
     start = time.perf_counter()
     result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1, **settings)
     seconds = time.perf_counter() - start
@@ -97,6 +96,8 @@ def run_case(case: case_lib.Case, mode: str, keep_history: bool) -> dict:
         "fitness": result.fitness,
         "correlation": result.correlation,
         "hypothesis": result.hypothesis,
+        "voxel_size_m": result.voxel_size,
+        "single_view": bool(result.single_view),
         "time_s": seconds,
         "final_translation_cost": last.translation_cost if last else math.nan,
         "final_rotation_cost": last.rotation_cost if last else math.nan,
@@ -184,7 +185,7 @@ def run(specs: list[case_lib.CaseSpec], sweep: set[str], log) -> tuple[list[dict
     records, drift, drift_done = [], [], set()
     for n, spec in enumerate(specs, 1):
         start = time.perf_counter()
-        case = case_lib.make_case(spec)
+        case = case_lib.in_camera_frame(case_lib.make_case(spec))
         generation = time.perf_counter() - start
         keep = (
             spec.offset is None

@@ -327,7 +327,7 @@ def _run_ours(method: str, problem: _Problem) -> np.ndarray:
         settings |= {"global_search": False, "initial_guess": T_init}
     elif viewpoint is not None and np.all(np.isfinite(viewpoint)):
         # A single-view scan: its sensor origin is known, as with any real scan.
-        settings["scene_viewpoint"] = np.asarray(viewpoint, dtype=float)
+        settings.update(sensor_origin=np.asarray(viewpoint, dtype=float), scene_view="single_view")
     result = svs.align(svs.PointCloud(*problem.model), svs.PointCloud(*problem.scene), **settings)
     return np.array(result.T_scene_model)
 

@@ -40,7 +40,7 @@ def poses(cases_per_cell: int) -> dict[str, list[str]]:
         case = case_lib.make_case(spec)
         model, scene = case.model_cloud(), case.scene_cloud()
         single_view = bool(np.all(np.isfinite(case.viewpoint)))
-        ours = {"scene_viewpoint": case.viewpoint} if single_view else {}
+        ours = {"sensor_origin": case.viewpoint, "scene_view": "single_view"} if single_view else {}
         out[f"{spec.case_id}/ours"] = fingerprint(svs.align(model, scene, **ours).T_scene_model)
         paper = svs.align(model, scene, global_search=False, max_iterations=30)
         out[f"{spec.case_id}/paper"] = fingerprint(paper.T_scene_model)

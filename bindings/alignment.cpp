@@ -15,10 +15,24 @@ namespace {
 constexpr Choices<RotationStep, 2> kRotationSteps{
     {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}};
 
-constexpr Choices<AlignStopReason, 3> kStopReasons{
+constexpr Choices<AlignStopReason, 4> kStopReasons{
     {{"converged", AlignStopReason::converged},
      {"max_iterations", AlignStopReason::max_iterations},
-     {"max_seconds", AlignStopReason::max_seconds}}};
+     {"max_seconds", AlignStopReason::max_seconds},
+     {"kept_start", AlignStopReason::kept_start}}};
+
+constexpr Choices<SceneView, 3> kSceneViews{{{"auto", SceneView::automatic},
+                                             {"single_view", SceneView::single_view},
+                                             {"all_sides", SceneView::all_sides}}};
+
+// The deprecated scene_viewpoint, as the one setting it stands for: a single view from it.
+void warn_scene_viewpoint() {
+  if (PyErr_WarnEx(PyExc_DeprecationWarning,
+                   "AlignParams.scene_viewpoint is deprecated: use sensor_origin (and "
+                   "scene_view='single_view' to declare a single view; 'auto' detects one)",
+                   2) != 0)
+    throw py::error_already_set();
+}
 
 }  // namespace
 
@@ -32,7 +46,9 @@ repr shows every field.
 Attributes
 ----------
 voxel_size : float
-    Voxel edge of the translation grid, metres (default 0.008).
+    Voxel edge of the translation grid, metres; 0 (default): derived from the model by
+    ``alignment_voxel_size`` (its typical size / 12: about 8 mm for a household object,
+    0.2-0.3 m for a view of a room).
 bandwidth : int
     B: EGI harmonics of degree l < B are correlated (default 16).
 translation_gain, rotation_gain : float
@@ -53,7 +69,9 @@ max_seconds : float
     Time budget of the whole alignment, seconds (default 0: none). Past it, the best pose
     so far is returned with ``converged = False`` and ``stop_reason = 'max_seconds'``.
 initial_guess : ndarray (4, 4)
-    T_scene_model to start from (ignored for the rotation when global_search is on).
+    T_scene_model to start from. With global search it seeds the search: verified and
+    ranked with its hypotheses (and, with guess_angle_deg or guess_distance, always
+    refined, the search kept to that neighbourhood).
 global_search : bool
     Start from the best rotations of the SO(3) search (default True).
 hypotheses : int
@@ -73,11 +91,27 @@ max_translation : float
     per axis; the grid then holds the scene and the model's start grown by this instead
     of by the model's reach, and farther peaks are ignored (two views of one scene, as in
     servoing). 0 (default): unbounded.
+sensor_origin : ndarray (3,)
+    Where the scene's sensor was, scene coordinates, metres (default the origin: a depth
+    camera's cloud in its own frame). Estimated normals point toward it.
+scene_view : str
+    'auto' (default): the scene is a single view from sensor_origin when
+    ``detect_single_view`` finds one (at least 95% of its points visible from there),
+    else seen from all sides; 'single_view': declared one; 'all_sides': never (a full
+    model, a fused map). For a single view fitness checks the pose against what the view
+    saw (the model rendered from there, pixel by pixel against the scan's depth), which
+    tells a pose from its flip; without a support plane the whole view is searched as
+    one part.
 scene_viewpoint : ndarray (3,) or None
-    Sensor origin of a single-view scene, metres: fitness then checks the pose against
-    what the view saw (the model rendered from there, pixel by pixel against the scan's
-    depth), which tells a pose from its flip; without a support plane the whole view is
-    searched as one part (default None: seen from all sides).
+    Deprecated alias: setting it sets sensor_origin and scene_view='single_view' (None:
+    scene_view='auto'); reading it gives sensor_origin for a declared single view.
+guess_angle_deg : float
+    With global search: the largest rotation from initial_guess searched, degrees, in
+    [0, 180] (default 0: no limit).
+guess_distance : float
+    With global search: the largest distance of the model's centroid from where
+    initial_guess puts it, metres (default 0: no limit). With either limit the guess is
+    always refined and only hypotheses inside both are kept.
 suppress_support_plane : bool
     With global search: search the scene without its support plane (a plane wider than 4
     model reaches holding over a fifth of the points, e.g. a table; fitness still sees
@@ -115,6 +149,7 @@ max_alternatives : int
     With global search: at most this many alternatives reported (``AlignResult.alternatives``),
     in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
 )doc");
+  align_params.attr("_deprecated_aliases") = py::make_tuple("scene_viewpoint");
   define_settings(align_params)
       .def_readwrite("voxel_size", &AlignParams::voxel_size)
       .def_readwrite("bandwidth", &AlignParams::bandwidth)
@@ -142,7 +177,32 @@ max_alternatives : int
       .def_readwrite("search_voxel_size", &AlignParams::search_voxel_size)
       .def_readwrite("window_margin", &AlignParams::window_margin)
       .def_readwrite("max_translation", &AlignParams::max_translation)
-      .def_readwrite("scene_viewpoint", &AlignParams::scene_viewpoint)
+      .def_property(
+          "sensor_origin", [](const AlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
+          [](AlignParams& p, const Eigen::Vector3d& origin) { p.sensor_origin = origin; })
+      .def_property(
+          "scene_view", [](const AlignParams& p) { return choice_name(p.scene_view, kSceneViews); },
+          [](AlignParams& p, const std::string& s) {
+            p.scene_view = parse_choice(s, kSceneViews, "scene_view");
+          })
+      .def_property(
+          "scene_viewpoint",
+          [](const AlignParams& p) -> std::optional<Eigen::Vector3d> {
+            warn_scene_viewpoint();
+            if (p.scene_view != SceneView::single_view) return std::nullopt;
+            return p.sensor_origin;
+          },
+          [](AlignParams& p, const std::optional<Eigen::Vector3d>& origin) {
+            warn_scene_viewpoint();
+            if (origin) {
+              p.sensor_origin = *origin;
+              p.scene_view = SceneView::single_view;
+            } else {
+              p.scene_view = SceneView::automatic;
+            }
+          })
+      .def_readwrite("guess_angle_deg", &AlignParams::guess_angle_deg)
+      .def_readwrite("guess_distance", &AlignParams::guess_distance)
       .def_readwrite("suppress_support_plane", &AlignParams::suppress_support_plane)
       .def_readwrite("polish", &AlignParams::polish)
       .def_readwrite("icp_refinement", &AlignParams::icp_refinement)
@@ -269,8 +329,12 @@ confidence : float
       .def_property_readonly(
           "stop_reason",
           [](const AlignResult& r) { return choice_name(r.stop_reason, kStopReasons); },
-          "Why it stopped: 'converged', 'max_iterations' or 'max_seconds'.")
-      .def_readonly("iterations", &AlignResult::iterations)
+          "Why the run of the returned pose stopped: 'converged', 'max_iterations', "
+          "'max_seconds', or 'kept_start' (global search: Algorithm 1 ended less fit than "
+          "the hypothesis it started from, whose pose was kept).")
+      .def_readonly("iterations", &AlignResult::iterations,
+                    "Iterations of the Algorithm 1 run that produced the returned pose: "
+                    "len(history); 0 for 'kept_start'.")
       .def_readonly(
           "fitness", &AlignResult::fitness,
           "How well the scene supports the pose, in [0, 1]: the share of the model's occupied "
@@ -289,7 +353,14 @@ confidence : float
       .def_property_readonly(
           "window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
           "Voxels of the window Algorithm 1 ran in, per axis.")
-      .def_readonly("history", &AlignResult::history)
+      .def_readonly("history", &AlignResult::history,
+                    "Every iteration of that run; history[-1].T_scene_model is where "
+                    "Algorithm 1 ended, T_scene_model that pose after the polish and ICP.")
+      .def_readonly("voxel_size", &AlignResult::voxel_size,
+                    "The voxel the alignment worked at, metres (derived for voxel_size=0).")
+      .def_readonly("single_view", &AlignResult::single_view,
+                    "True when the scene was checked as a single view from sensor_origin "
+                    "(declared, or detected by detect_single_view).")
       .def_readonly("confidence", &AlignResult::confidence,
                     "The confidence that the pose is right, in [0, 1]: the share of the model "
                     "points the sensor would see that lie within a quarter voxel of a scene "
@@ -367,6 +438,60 @@ Returns
 -------
 AxisRotationStep
     ``turn`` (rad), ``slope``, ``curvature``, ``newton``, ``capped``.
+)doc");
+
+  py::class_<SingleViewEvidence>(m, "SingleViewEvidence",
+                                 "The evidence that a scene is a single view from a point.")
+      .def_readonly("visible", &SingleViewEvidence::visible,
+                    "Share of the points a sensor there sees (in front, facing it, nearest "
+                    "along their ray), in [0, 1].")
+      .def_readonly("single_view", &SingleViewEvidence::single_view,
+                    "visible >= SINGLE_VIEW_THRESHOLD.")
+      .def("__repr__", [](const SingleViewEvidence& e) {
+        std::ostringstream out;
+        out << "SingleViewEvidence(visible=" << e.visible
+            << ", single_view=" << (e.single_view ? "True" : "False") << ")";
+        return out.str();
+      });
+  m.attr("SINGLE_VIEW_THRESHOLD") = single_view_threshold;
+
+  m.def(
+      "detect_single_view",
+      [](const PointCloud& scene, const Eigen::Vector3d& sensor_origin, double tolerance) {
+        py::gil_scoped_release release;
+        return detect_single_view(scene, sensor_origin, tolerance);
+      },
+      py::arg("scene"), py::arg("sensor_origin"), py::arg("tolerance"), R"doc(
+Whether ``scene`` is a single view from ``sensor_origin``: what ``align`` decides with
+``scene_view='auto'``.
+
+Parameters
+----------
+scene : PointCloud
+    With normals, metres.
+sensor_origin : array_like of float, shape (3,)
+    The candidate sensor origin, scene coordinates, metres.
+tolerance : float
+    Metres (align uses its voxel): a point within it of the plane of its pixel's nearest
+    point counts as visible.
+
+Returns
+-------
+SingleViewEvidence
+    ``visible`` (share of points seen from there) and ``single_view``
+    (``visible >= SINGLE_VIEW_THRESHOLD``).
+)doc");
+
+  m.def(
+      "alignment_voxel_size",
+      [](const PointCloud& model, const PointCloud& scene) {
+        return alignment_voxel_size(model, scene);
+      },
+      py::arg("model"), py::arg("scene"), R"doc(
+The voxel ``align`` derives for ``voxel_size=0``, metres: max(extent / 12, extent /
+sqrt(N)), extent the model's typical size (twice the median distance of its points from
+their median), N its points (the rule of ``view_scale`` with its own constants); for a
+model of one place (one point, coincident points) the scene's.
 )doc");
 
   m.def("_align", &align, py::arg("model"), py::arg("scene"), py::arg("params"),

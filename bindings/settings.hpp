@@ -4,10 +4,12 @@
 // field, equality, copy and deepcopy. The fields are the struct's bound properties (its
 // def_readwrite and def_property), found on the class when called, in the order they were
 // bound: a field added to the binding is in the constructor and the repr with no other line.
+// A deprecated alias (listed in the class's `_deprecated_aliases`) is a keyword only.
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -17,15 +19,30 @@ namespace py = pybind11;
 
 namespace settings_detail {
 
-/// The settable properties of the bound class `type`, in the order they were bound.
-inline std::vector<std::string> field_names(const py::handle& type) {
+/// The deprecated aliases of the bound class `type`: settable properties that stand for
+/// other fields (its `_deprecated_aliases`, a tuple of names; none if it has none).
+inline std::vector<std::string> alias_names(const py::handle& type) {
+  std::vector<std::string> names;
+  if (py::hasattr(type, "_deprecated_aliases")) {
+    for (const auto& name : type.attr("_deprecated_aliases")) names.push_back(py::str(name));
+  }
+  return names;
+}
+
+/// The settable properties of the bound class `type`, in the order they were bound; with
+/// `aliases` off, without its deprecated aliases (the repr and equality show and compare
+/// the fields they stand for, and reading an alias warns).
+inline std::vector<std::string> field_names(const py::handle& type, bool aliases = false) {
   const py::object property = py::module_::import("builtins").attr("property");
+  const std::vector<std::string> deprecated = alias_names(type);
   std::vector<std::string> names;
   for (const auto& item : type.attr("__dict__").attr("items")()) {
     const auto pair = item.cast<py::tuple>();
     const std::string name = pair[0].cast<std::string>();
     if (name.rfind('_', 0) == 0 || !py::isinstance(pair[1], property)) continue;
     if (pair[1].attr("fset").is_none()) continue;  // read-only: not a setting
+    const bool alias = std::find(deprecated.begin(), deprecated.end(), name) != deprecated.end();
+    if (alias && !aliases) continue;
     names.push_back(name);
   }
   return names;
@@ -45,7 +62,7 @@ inline std::string value_repr(const py::handle& value) {
 /// that is no field (with the closest field names) or a value of the wrong type.
 inline void set_fields(const py::object& self, const py::kwargs& fields) {
   const std::string name = type_name(self);
-  const std::vector<std::string> names = field_names(py::type::of(self));
+  const std::vector<std::string> names = field_names(py::type::of(self), true);
   for (const auto& [key_handle, value] : fields) {
     const std::string key = py::str(key_handle);
     bool known = false;

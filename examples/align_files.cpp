@@ -4,8 +4,9 @@
 //
 // The steps are those of spectral_vs.align in Python: both clouds are voxel-downsampled
 // to half the alignment voxel, clouds without normals get normals fitted over twice the
-// voxel size and oriented toward the sensor (the viewpoint), then Algorithm 1 runs with a
-// global rotation search.
+// voxel size and oriented toward the sensor (the viewpoint, which is also the sensor_origin
+// from which a single view is detected), then Algorithm 1 runs with a global rotation
+// search. The voxel, unless given, is derived from the clouds as align() derives it.
 #include <spectral_vs/alignment/aligner.hpp>
 #include <spectral_vs/representation/cloud_io.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
@@ -20,7 +21,8 @@
 
 namespace {
 
-// Exit status: 0 when the alignment converged; 3 when it did not (the result is still
+// Exit status: 0 when the alignment settled (converged, or kept a verified hypothesis over
+// where Algorithm 1 went: stop_reason kept_start); 3 when it did not (the result is still
 // printed); 1 for an error such as an unreadable file; 2 for a bad command line.
 constexpr int kConverged = 0;
 constexpr int kError = 1;
@@ -35,9 +37,10 @@ void print_usage(std::FILE* out) {
                "the 4x4 transform that maps model coordinates into the scene.\n"
                "\n"
                "options:\n"
-               "  --voxel-size M      voxel edge of the translation grid, metres (default 0.008)\n"
-               "  --viewpoint X Y Z   sensor origin toward which estimated normals point,\n"
-               "                      metres (default 0 0 0)\n"
+               "  --voxel-size M      voxel edge of the translation grid, metres (default:\n"
+               "                      derived from the model, alignment_voxel_size)\n"
+               "  --viewpoint X Y Z   sensor origin: estimated normals point toward it and a\n"
+               "                      single view is detected from it, metres (default 0 0 0)\n"
                "  --local             no global rotation search: start from the identity\n"
                "  --max-iterations N  iterations of Algorithm 1 (default 100)\n"
                "  --threads N         threads for the FFTs and the rotation search (default 1)\n"
@@ -51,6 +54,7 @@ struct Options {
   std::string scene_path;
   spectral_vs::AlignParams params;
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
+  bool voxel_given = false;
 };
 
 bool parse_double(const char* text, double& value) {
@@ -76,6 +80,7 @@ bool parse_options(int argc, char** argv, Options& options) {
     bool ok = true;
     if (arg == "--voxel-size" && values_left >= 1) {
       ok = parse_double(argv[++i], options.params.voxel_size);
+      options.voxel_given = true;
     } else if (arg == "--viewpoint" && values_left >= 3) {
       for (int k = 0; k < 3 && ok; ++k) ok = parse_double(argv[++i], options.viewpoint[k]);
     } else if (arg == "--local") {
@@ -96,7 +101,8 @@ bool parse_options(int argc, char** argv, Options& options) {
     }
   }
   // Checked here because the clouds are downsampled with it before `align` sees it.
-  if (!(options.params.voxel_size > 0.0 && std::isfinite(options.params.voxel_size))) {
+  if (options.voxel_given &&
+      !(options.params.voxel_size > 0.0 && std::isfinite(options.params.voxel_size))) {
     std::fprintf(stderr, "align_files: --voxel-size must be a positive number of metres\n");
     return false;
   }
@@ -110,10 +116,9 @@ bool parse_options(int argc, char** argv, Options& options) {
 }
 
 // A cloud ready for `align`: downsampled to half a voxel, with normals.
-spectral_vs::PointCloud load_prepared(const std::string& path, const Options& options,
-                                      const char* role) {
-  spectral_vs::CloudFileInfo info;
-  const spectral_vs::PointCloud raw = spectral_vs::load_cloud(path, &info);
+spectral_vs::PointCloud prepared(const spectral_vs::PointCloud& raw,
+                                 const spectral_vs::CloudFileInfo& info, const std::string& path,
+                                 const Options& options, const char* role) {
   const double voxel_size = options.params.voxel_size;
   const spectral_vs::PointCloud downsampled = spectral_vs::voxel_downsample(raw, voxel_size / 2);
   std::printf("%s %s: %zu points (%zu non-finite dropped), %zu after downsampling to %.1f mm, ",
@@ -150,8 +155,18 @@ int main(int argc, char** argv) {
   }
 
   try {
-    const spectral_vs::PointCloud model = load_prepared(options.model_path, options, "model");
-    const spectral_vs::PointCloud scene = load_prepared(options.scene_path, options, "scene");
+    spectral_vs::CloudFileInfo model_info, scene_info;
+    const spectral_vs::PointCloud raw_model =
+        spectral_vs::load_cloud(options.model_path, &model_info);
+    const spectral_vs::PointCloud raw_scene =
+        spectral_vs::load_cloud(options.scene_path, &scene_info);
+    options.params.sensor_origin = options.viewpoint;
+    if (!options.voxel_given)
+      options.params.voxel_size = spectral_vs::alignment_voxel_size(raw_model, raw_scene);
+    const spectral_vs::PointCloud model =
+        prepared(raw_model, model_info, options.model_path, options, "model");
+    const spectral_vs::PointCloud scene =
+        prepared(raw_scene, scene_info, options.scene_path, options, "scene");
 
     const auto start = std::chrono::steady_clock::now();
     const spectral_vs::AlignResult result = spectral_vs::align(model, scene, options.params);
@@ -163,11 +178,15 @@ int main(int argc, char** argv) {
       const auto& T = result.T_scene_model;
       std::printf("  %10.6f %10.6f %10.6f %10.6f\n", T(r, 0), T(r, 1), T(r, 2), T(r, 3));
     }
-    std::printf("converged: %s\n", result.converged ? "yes" : "no");
+    const bool settled =
+        result.converged || result.stop_reason == spectral_vs::AlignStopReason::kept_start;
+    std::printf("converged: %s\n", settled ? "yes" : "no");
     std::printf("iterations: %d\n", result.iterations);
     std::printf("fitness: %.3f\n", result.fitness);
+    std::printf("voxel: %.1f mm, single view: %s\n", 1000.0 * result.voxel_size,
+                result.single_view ? "yes" : "no");
     std::printf("time: %.1f ms\n", elapsed.count());
-    return result.converged ? kConverged : kNotConverged;
+    return settled ? kConverged : kNotConverged;
   } catch (const std::exception& error) {
     // The library reports bad input (a missing file, an empty cloud, a parameter out of
     // range) as std::invalid_argument with a message naming the argument.

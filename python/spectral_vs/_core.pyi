@@ -362,7 +362,11 @@ class AlignParams:
         search_voxel_size: float = ...,
         window_margin: float = ...,
         max_translation: float = ...,
+        sensor_origin: npt.ArrayLike = ...,
+        scene_view: str = ...,
         scene_viewpoint: npt.ArrayLike | None = ...,
+        guess_angle_deg: float = ...,
+        guess_distance: float = ...,
         suppress_support_plane: bool = ...,
         polish: bool = ...,
         icp_refinement: bool = ...,
@@ -377,7 +381,7 @@ class AlignParams:
     __hash__: ClassVar[None]  # type: ignore[assignment]
     def __copy__(self) -> AlignParams: ...
     def __deepcopy__(self, memo: dict[Any, Any]) -> AlignParams: ...
-    voxel_size: float  # metres
+    voxel_size: float  # metres, 0: derived from the model (alignment_voxel_size)
     bandwidth: int
     translation_gain: float
     rotation_gain: float
@@ -391,13 +395,23 @@ class AlignParams:
     def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
     @initial_guess.setter
     def initial_guess(self, value: npt.ArrayLike) -> None: ...
+    guess_angle_deg: float  # degrees, 0: no limit
+    guess_distance: float  # metres, 0: no limit
     global_search: bool
     hypotheses: int
     refinements: int
     search_voxel_size: float  # metres, 0: automatic
     window_margin: float  # metres, 0: automatic
     max_translation: float  # metres, 0: unbounded
-    scene_viewpoint: _Array | None  # (3,) metres
+    @property
+    def sensor_origin(self) -> _Array: ...  # (3,) metres
+    @sensor_origin.setter
+    def sensor_origin(self, value: npt.ArrayLike) -> None: ...
+    scene_view: str  # "auto", "single_view" or "all_sides"
+    @property
+    def scene_viewpoint(self) -> _Array | None: ...  # deprecated: sensor_origin, scene_view
+    @scene_viewpoint.setter
+    def scene_viewpoint(self, value: npt.ArrayLike | None) -> None: ...
     suppress_support_plane: bool
     polish: bool
     icp_refinement: bool
@@ -436,7 +450,7 @@ class AlignResult:
     @property
     def converged(self) -> bool: ...
     @property
-    def stop_reason(self) -> str: ...  # "converged", "max_iterations" or "max_seconds"
+    def stop_reason(self) -> str: ...  # "converged", "max_iterations", "max_seconds", "kept_start"
     @property
     def iterations(self) -> int: ...
     @property
@@ -457,6 +471,10 @@ class AlignResult:
     def icp_iterations(self) -> int: ...
     @property
     def history(self) -> list[AlignIteration]: ...
+    @property
+    def voxel_size(self) -> float: ...  # metres
+    @property
+    def single_view(self) -> bool: ...
     @property
     def confidence(self) -> float: ...  # in [0, 1]
     @property
@@ -590,6 +608,21 @@ class ViewScale:
 def view_scale(
     reference: PointCloud, current: PointCloud, voxels_across: float = 32.0
 ) -> ViewScale: ...
+
+class SingleViewEvidence:
+    """The evidence that a scene is a single view from a point."""
+
+    @property
+    def visible(self) -> float: ...
+    @property
+    def single_view(self) -> bool: ...
+
+SINGLE_VIEW_THRESHOLD: float
+
+def detect_single_view(
+    scene: PointCloud, sensor_origin: npt.ArrayLike, tolerance: float
+) -> SingleViewEvidence: ...
+def alignment_voxel_size(model: PointCloud, scene: PointCloud) -> float: ...
 
 class ViewAlignParams:
     """Settings of align_views; every length 0 by default: derived from the views."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import math
 import numbers
+import warnings
 from typing import Any
 
 import numpy as np
@@ -14,6 +15,7 @@ from spectral_vs._core import (
     AlignResult,
     PointCloud,
     _align,
+    alignment_voxel_size,
     estimate_normals,
     voxel_downsample,
 )
@@ -91,14 +93,15 @@ def check_voxel_size(voxel_size: Any) -> None:
         raise ValueError(f"voxel_size must be finite and > 0 metres, got {voxel_size}")
 
 
-def check_viewpoint(viewpoint: Any) -> np.ndarray:
-    """The sensor origin as a finite (3,) float array; ``ValueError`` otherwise."""
+def check_viewpoint(viewpoint: Any, argument: str = "viewpoint") -> np.ndarray:
+    """The sensor origin as a finite (3,) float array; ``ValueError`` naming ``argument``
+    otherwise."""
     try:
         point = np.asarray(viewpoint, dtype=float)
     except (TypeError, ValueError) as error:
-        raise ValueError(f"viewpoint must be 3 numbers (metres), got {viewpoint!r}") from error
+        raise ValueError(f"{argument} must be 3 numbers (metres), got {viewpoint!r}") from error
     if point.shape != (3,) or not np.all(np.isfinite(point)):
-        raise ValueError(f"viewpoint must be 3 finite numbers (metres), got {viewpoint!r}")
+        raise ValueError(f"{argument} must be 3 finite numbers (metres), got {viewpoint!r}")
     return point
 
 
@@ -148,13 +151,53 @@ def prepare(
     return cloud
 
 
+_UNSET: Any = object()
+
+
+def _deprecated_viewpoints(overrides: dict[str, Any], viewpoint: Any) -> dict[str, Any]:
+    """``overrides`` with the deprecated viewpoint arguments turned into ``sensor_origin``
+    (and, for ``scene_viewpoint``, ``scene_view``), each with a ``DeprecationWarning``."""
+    overrides = dict(overrides)
+    if "scene_viewpoint" in overrides:
+        old = overrides.pop("scene_viewpoint")
+        warnings.warn(
+            "align(scene_viewpoint=...) is deprecated: use sensor_origin=... (and "
+            "scene_view='single_view' to declare a single view; the default 'auto' detects one)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+        if old is not None:
+            overrides.setdefault("sensor_origin", check_viewpoint(old, "scene_viewpoint"))
+            overrides.setdefault("scene_view", "single_view")
+    if viewpoint is not _UNSET:
+        warnings.warn(
+            "align(viewpoint=...) is deprecated: use sensor_origin=..., the one sensor origin "
+            "that orients estimated normals and from which a single view is detected",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+        overrides.setdefault("sensor_origin", check_viewpoint(viewpoint))
+    return overrides
+
+
+def derived_voxel_size(settings: AlignParams, model: PointCloud, scene: PointCloud) -> AlignParams:
+    """``settings`` with ``voxel_size = 0`` replaced by :func:`alignment_voxel_size` of the
+    clouds as given (before any downsampling): both are then prepared at it."""
+    if settings.voxel_size == 0:
+        for cloud, argument in ((model, "model"), (scene, "scene")):
+            if len(cloud) == 0:
+                raise ValueError(f"{argument} is empty: at least 1 finite point is needed")
+        settings.voxel_size = alignment_voxel_size(model, scene)
+    return settings
+
+
 def align(
     model: CloudLike,
     scene: CloudLike,
     params: AlignParams | None = None,
     *,
     downsample: bool = True,
-    viewpoint: Any = (0.0, 0.0, 0.0),
+    viewpoint: Any = _UNSET,
     **overrides: Any,
 ) -> AlignResult:
     """Align ``model`` onto ``scene``: Algorithm 1 with, by default, a global rotation search.
@@ -164,26 +207,34 @@ def align(
     model, scene : PointCloud, open3d.geometry.PointCloud or ndarray
         Clouds in metres, as :class:`PointCloud`, Open3D clouds (their points and normals)
         or (N, 3) / (N, 6) arrays (points, normals).
-        Missing normals are estimated (radius 2 x voxel_size, oriented toward ``viewpoint``,
-        the sensor origin of a scan).
+        Missing normals are estimated (radius 2 x voxel_size, oriented toward
+        ``sensor_origin``, the origin by default: a depth camera's cloud in its own frame).
     params : AlignParams, optional
         Settings; defaults to ``AlignParams()``.
     downsample : bool
         Voxel-downsample both clouds to half the voxel size first (default True).
     viewpoint : array_like (3,)
-        Sensor origin used to orient estimated normals, metres.
+        Deprecated alias of ``sensor_origin`` (``DeprecationWarning``).
     **overrides
         Any :class:`AlignParams` field, e.g. ``voxel_size=0.005, global_search=False``.
+        The sensor: ``sensor_origin`` (metres, default the origin) orients estimated
+        normals, and with ``scene_view='auto'`` (default) the scene is checked as a single
+        view from it when :func:`detect_single_view` finds one; ``'single_view'`` declares
+        one, ``'all_sides'`` never (a full model, a fused map). ``scene_viewpoint=p`` is a
+        deprecated alias of ``sensor_origin=p, scene_view='single_view'``.
+        ``voxel_size=0`` (default) derives the voxel from the model
+        (:func:`alignment_voxel_size`).
 
     Returns
     -------
     AlignResult
         ``T_scene_model`` maps model coordinates into the scene; ``converged``,
-        ``iterations``, ``fitness`` (in [0, 1]: the share of model voxels next to scene
-        points, or with ``scene_viewpoint`` the share of the model's rendered view that the
-        scan confirms, hidden pixels counted half; see ``AlignResult.fitness``) and the
-        per-iteration ``history`` of J_t, J_r and the gradients. Not converging within
-        ``max_iterations`` gives ``converged = False``, not an exception.
+        ``iterations`` and the per-iteration ``history`` of J_t, J_r and the gradients
+        (of the Algorithm 1 run that produced the returned pose), ``fitness`` (in [0, 1]:
+        the share of model voxels next to scene points, or for a single view the share of
+        the model's rendered view that the scan confirms, hidden pixels counted half; see
+        ``AlignResult.fitness``), ``voxel_size`` (the one used) and ``single_view``. Not
+        converging within ``max_iterations`` gives ``converged = False``, not an exception.
 
     Raises
     ------
@@ -202,12 +253,11 @@ def align(
     case. ``max_seconds`` counts from the start of the C++ alignment, after downsampling
     and normal estimation.
     """
+    overrides = _deprecated_viewpoints(overrides, viewpoint)
     settings = with_overrides(params, AlignParams, overrides, "alignment setting")
-    viewpoint = check_viewpoint(viewpoint)
-    model_cloud = prepare(
-        as_cloud(model, "model"), "model", settings.voxel_size, downsample, viewpoint
-    )
-    scene_cloud = prepare(
-        as_cloud(scene, "scene"), "scene", settings.voxel_size, downsample, viewpoint
-    )
+    origin = np.asarray(settings.sensor_origin, dtype=float)
+    model_cloud, scene_cloud = as_cloud(model, "model"), as_cloud(scene, "scene")
+    settings = derived_voxel_size(settings, model_cloud, scene_cloud)
+    model_cloud = prepare(model_cloud, "model", settings.voxel_size, downsample, origin)
+    scene_cloud = prepare(scene_cloud, "scene", settings.voxel_size, downsample, origin)
     return _align(model_cloud, scene_cloud, settings)

@@ -152,7 +152,7 @@ TEST(ModelAligner, FitnessIsAlignsWhereTheModelOnlyPartlyMeetsTheScene) {
   // The fitness map is built only around the model: a scene that holds part of the
   // model (a window of it), a model that sticks out of the scene's box (its voxels
   // outside count, unsupported), a turned model (few normals agree) and the visible
-  // points only (scene_viewpoint) all score as align() scores them.
+  // points only (a declared single view) all score as align() scores them.
   std::mt19937 rng(16);
   const PointCloud model = table_scene(rng);
   const PointCloud full =
@@ -169,7 +169,10 @@ TEST(ModelAligner, FitnessIsAlignsWhereTheModelOnlyPartlyMeetsTheScene) {
   const PointCloud part(p, n);
   AlignParams params = servo_params();
   for (const bool visible : {false, true}) {
-    if (visible) params.scene_viewpoint = Eigen::Vector3d(0.1, 0.0, 1.0);
+    if (visible) {
+      params.scene_view = SceneView::single_view;
+      params.sensor_origin = Eigen::Vector3d(0.1, 0.0, 1.0);
+    }
     ModelAligner aligner(model, params);
     for (const PointCloud* scene : {&full, &part}) {
       for (const Transform& guess :

@@ -827,9 +827,9 @@ CASES = [
     ),
     Case(
         "align/viewpoint shape",
-        lambda f: svs.align(POINTS, POINTS, viewpoint=(1, 2)),
-        ValueError,
-        "viewpoint",
+        lambda f: svs.align(POINTS, POINTS, sensor_origin=(1, 2)),
+        TypeError,
+        "sensor_origin",
     ),
     Case(
         "align/rotation step",

@@ -110,7 +110,7 @@ def test_max_iterations_reports_not_converged():
 
 def test_arrays_without_normals_are_accepted(rng):
     points, _ = box_with_ball(rng, 4000)
-    result = svs.align(points, points + np.array([0.01, 0.0, 0.0]), viewpoint=(0.0, 0.0, 1.0))
+    result = svs.align(points, points + np.array([0.01, 0.0, 0.0]), sensor_origin=(0.0, 0.0, 1.0))
     assert np.linalg.norm(np.asarray(result.T_scene_model)[:3, 3] - [0.01, 0, 0]) < 0.002
 
 
@@ -275,7 +275,9 @@ def test_view_fitness_tells_the_pose_from_its_flip():
         for T in (case.T_true, flip @ case.T_true):
             result = svs.align(
                 case.model_cloud(), case.scene_cloud(), global_search=False, initial_guess=T,
-                max_iterations=1, scene_viewpoint=case.viewpoint, downsample=False,
+                max_iterations=1, sensor_origin=case.viewpoint, scene_view="single_view",
+                downsample=False,
+                voxel_size=0.008,
             )  # fmt: skip
             fitness.append(result.fitness)
         assert fitness[0] > 0.75, spec.case_id
@@ -293,10 +295,14 @@ def test_single_view_search_tells_near_symmetric_objects_from_their_flips():
     successes = 0
     for spec in cases.case_specs(["partial"], [60.0, 150.0], 10):
         case = cases.make_case(spec)
-        result = svs.align(case.model_cloud(), case.scene_cloud(), scene_viewpoint=case.viewpoint)
+        result = svs.align(
+            case.model_cloud(),
+            case.scene_cloud(),
+            sensor_origin=case.viewpoint,
+            scene_view="single_view",
+        )
         rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
         successes += rotation_deg < 5.0 and translation_m < 0.010
-        assert result.icp_iterations > 0
     assert successes >= 18
 
 
@@ -311,7 +317,12 @@ def test_part_search_finds_the_target_in_clutter():
     successes = 0
     for spec in cases.case_specs(["clutter"], [60.0, 150.0], 8):
         case = cases.make_case(spec)
-        result = svs.align(case.model_cloud(), case.scene_cloud(), scene_viewpoint=case.viewpoint)
+        result = svs.align(
+            case.model_cloud(),
+            case.scene_cloud(),
+            sensor_origin=case.viewpoint,
+            scene_view="single_view",
+        )
         rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
         successes += rotation_deg < 5.0 and translation_m < 0.010
     assert successes >= 13
@@ -336,3 +347,52 @@ def test_icp_refinement_tightens_the_spectral_result():
     without, with_icp = np.median(errors[False], axis=0), np.median(errors[True], axis=0)
     assert with_icp[0] < 0.25 and with_icp[1] < 0.2, with_icp  # degrees, mm
     assert with_icp[0] < without[0] and with_icp[1] < without[1]
+
+
+def test_deprecated_viewpoints_warn_and_stand_for_sensor_origin():
+    """align(viewpoint=p) is sensor_origin=p; scene_viewpoint=p is sensor_origin=p with
+    scene_view='single_view': the same poses, each with a DeprecationWarning."""
+    rng = np.random.default_rng(7)
+    model, scene, _, _ = make_case(rng, 30)
+    common = {"hypotheses": 4, "refinements": 1, "max_iterations": 5}
+    origin = (0.0, 0.0, 1.5)
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        old = svs.align(model, scene, scene_viewpoint=origin, **common)
+    new = svs.align(model, scene, sensor_origin=origin, scene_view="single_view", **common)
+    np.testing.assert_array_equal(old.T_scene_model, new.T_scene_model)
+    assert old.single_view and new.single_view
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        old = svs.align(model, scene, viewpoint=origin, **common)
+    new = svs.align(model, scene, sensor_origin=origin, **common)
+    np.testing.assert_array_equal(old.T_scene_model, new.T_scene_model)
+    params = svs.AlignParams()
+    with pytest.warns(DeprecationWarning):
+        params.scene_viewpoint = origin
+    assert params.scene_view == "single_view"
+    np.testing.assert_array_equal(params.sensor_origin, origin)
+
+
+def test_camera_frame_views_are_single_views_and_full_models_are_not():
+    """With the defaults, a scan in its camera's frame is checked as a single view and a
+    full model's copy is not: the first 9 cases of each family at 60 degrees."""
+    cases = _benchmark_cases()
+    for family, expected in (("partial", True), ("clutter", True), ("full", False)):
+        for spec in cases.case_specs([family], [60.0], 9):
+            case = cases.in_camera_frame(cases.make_case(spec))
+            result = svs.align(case.model_cloud(), case.scene_cloud(), hypotheses=4, refinements=1)
+            assert result.single_view is expected, spec.case_id
+
+
+def test_a_correct_initial_guess_is_never_made_worse():
+    """A guess at the truth, with a neighbourhood of 10 degrees and 10 mm, ends within 2
+    degrees and 2 mm of the truth (the EGI's accuracy floor with noisy normals is 1-1.5
+    degrees) on every one of 18 single-view and clutter cases (the guess's own error is 0)."""
+    cases = _benchmark_cases()
+    for spec in cases.case_specs(["partial", "clutter"], [90.0], 9):
+        case = cases.in_camera_frame(cases.make_case(spec))
+        result = svs.align(
+            case.model_cloud(), case.scene_cloud(), initial_guess=case.T_true,
+            guess_angle_deg=10.0, guess_distance=0.01,
+        )  # fmt: skip
+        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
+        assert rotation_deg < 2.0 and translation_m < 0.002, (spec.case_id, rotation_deg)

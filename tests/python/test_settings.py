@@ -16,11 +16,16 @@ BOUND = [svs.AlignParams, svs.ViewAlignParams, svs.DampingParams, svs.VelocityCo
 
 
 def fields_of(cls: type) -> list[str]:
-    """The settable properties of a bound class, in the order they were bound."""
+    """The settable properties of a bound class, in the order they were bound, without its
+    deprecated aliases (keywords that stand for other fields)."""
+    aliases = getattr(cls, "_deprecated_aliases", ())
     return [
         name
         for name, value in vars(cls).items()
-        if not name.startswith("_") and isinstance(value, property) and value.fset is not None
+        if not name.startswith("_")
+        and isinstance(value, property)
+        and value.fset is not None
+        and name not in aliases
     ]
 
 
@@ -85,10 +90,10 @@ def test_the_repr_evaluates_back_to_equal_settings(cls):
 
 def test_the_repr_shows_values_as_written():
     text = repr(
-        svs.AlignParams(voxel_size=0.005, scene_viewpoint=(0, 0, 0), rotation_step="gradient")
+        svs.AlignParams(voxel_size=0.005, sensor_origin=(0, 0, 0.5), rotation_step="gradient")
     )
     assert "voxel_size=0.005," in text
-    assert "scene_viewpoint=[0.0, 0.0, 0.0]," in text
+    assert "sensor_origin=[0.0, 0.0, 0.5]," in text
     assert "rotation_step='gradient'," in text
     assert "initial_guess=[[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]," in text
     nested = repr(svs.VelocityCommandParams(dt=0.1))
@@ -137,3 +142,14 @@ def test_servo_params_take_every_field_and_show_it():
     assert "align_overrides={'threads': 2}" in text
     with pytest.raises(TypeError, match="unexpected keyword argument 'colour'"):
         svs.ServoParams(colour=1)
+
+
+def test_a_deprecated_alias_is_a_keyword_but_not_a_field_of_the_repr():
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        params = svs.AlignParams(scene_viewpoint=(0.1, 0.0, 0.0))
+    np.testing.assert_allclose(params.sensor_origin, [0.1, 0.0, 0.0])
+    assert params.scene_view == "single_view"
+    text = repr(params)
+    assert "scene_viewpoint" not in text
+    assert "sensor_origin=[0.1, 0.0, 0.0]," in text and "scene_view='single_view'," in text
+    assert eval(text, {"AlignParams": svs.AlignParams}) == params

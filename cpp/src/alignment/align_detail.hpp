@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 #include <chrono>
+#include <optional>
 
 namespace spectral_vs::detail {
 
@@ -16,6 +17,10 @@ void check_align_params(const AlignParams& params);
 /// The time limit of params.max_seconds from `start` (none for 0).
 std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
                                                   std::chrono::steady_clock::time_point start);
+
+/// The sensor origin of a scene declared a single view (scene_view = single_view, or the
+/// deprecated scene_viewpoint); none otherwise.
+std::optional<Eigen::Vector3d> declared_viewpoint(const AlignParams& params);
 
 /// The phase-correlation settings of the alignment's grids (sub-voxel, threads, limits).
 PhaseCorrelationParams phase_params(const AlignParams& params);

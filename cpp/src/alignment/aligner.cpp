@@ -52,7 +52,9 @@ constexpr double kFlatAxisRatio = 0.1;
 constexpr double kFlatAxisStep = 15.0 * M_PI / 180.0;  // turns tried about the flat axis
 
 void check_params(const AlignParams& p) {
-  detail::require_positive_finite(p.voxel_size, "voxel_size");
+  if (!(p.voxel_size >= 0.0 && std::isfinite(p.voxel_size))) {
+    fail("voxel_size must be >= 0 metres (0: derived from the model), got ", p.voxel_size);
+  }
   if (p.bandwidth < 2 || p.bandwidth > kMaxBandwidth) {
     fail("bandwidth must be in [2, ", kMaxBandwidth, "], got ", p.bandwidth);
   }
@@ -87,10 +89,22 @@ void check_params(const AlignParams& p) {
     fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);
   }
   require_rigid_transform(p.initial_guess, "initial_guess");
+  if (!(p.guess_angle_deg >= 0.0 && p.guess_angle_deg <= 180.0)) {
+    fail("guess_angle_deg must be in [0, 180] degrees (0: no limit), got ", p.guess_angle_deg);
+  }
+  if (!(p.guess_distance >= 0.0 && std::isfinite(p.guess_distance))) {
+    fail("guess_distance must be >= 0 metres (0: no limit), got ", p.guess_distance);
+  }
+  if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
   if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
   if (p.max_alternatives < 0 || p.max_alternatives > 64) {
     fail("max_alternatives must be in [0, 64], got ", p.max_alternatives);
   }
+}
+
+// A guess's neighbourhood (AlignParams::guess_angle_deg, guess_distance) is set.
+bool has_neighbourhood(const AlignParams& p) {
+  return p.guess_angle_deg > 0.0 || p.guess_distance > 0.0;
 }
 
 using detail::Pose;
@@ -133,7 +147,7 @@ using Clock = std::chrono::steady_clock;
 // and moves to a window once the translation steps fit in it.
 struct Problem {
   const SceneMap& scene;
-  const RangeImage* view;  // the scene's range image, for a single view (scene_viewpoint)
+  const RangeImage* view;  // the scene's range image, for a single view
   MovingModel& model;
   const ShCoefficients& model_coefficients;
   const AlignParams& params;
@@ -141,6 +155,7 @@ struct Problem {
   Clock::time_point deadline = Clock::time_point::max();    // of params.max_seconds
   std::optional<Eigen::Vector3d> flat_axis = std::nullopt;  // of the model's EGI, if it has one
   bool dense_model = true;  // at least kPolishMinDensity points per occupied voxel
+  std::optional<Eigen::Vector3d> viewpoint = std::nullopt;  // the sensor of a single view
 };
 
 bool expired(const Problem& problem) { return Clock::now() > problem.deadline; }
@@ -353,9 +368,9 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       hypothesis.index = int(hypotheses.size());
       hypothesis.pose.R = refine_rotation(*correlation, candidate.R, refine).R;
       hypothesis.pose.offset = centroid - problem.model.centroid();
-      if (params.scene_viewpoint) {
+      if (problem.viewpoint) {
         hypothesis.pose.offset -=
-            problem.model.facing_side(hypothesis.pose.R, centroid - *params.scene_viewpoint);
+            problem.model.facing_side(hypothesis.pose.R, centroid - *problem.viewpoint);
       }
       // Twice: the coarse shift brings the model near enough for the fine one to be exact.
       hypothesis.pose.offset += coarse->estimate(problem.model.move(hypothesis.pose)).shift;
@@ -484,8 +499,15 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   const double start_fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
                                                      problem.params.voxel_size);
   if (start_fitness > result.fitness) {
+    // The returned pose is then not where this run ended: it claims no iterations.
     result.T_scene_model = problem.model.transform_of(hypothesis.pose);
     result.fitness = start_fitness;
+    result.correlation = correlation.evaluate(hypothesis.pose.R).value;
+    result.translation_peak = 0.0;
+    result.converged = false;
+    result.stop_reason = AlignStopReason::kept_start;
+    result.iterations = 0;
+    result.history.clear();
   }
   return result;
 }
@@ -573,7 +595,7 @@ constexpr double kIcpFineDistance = 0.4;
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result) {
   detail::IcpSettings settings;
-  settings.viewpoint = problem.params.scene_viewpoint;
+  settings.viewpoint = problem.viewpoint;
   Transform T_scene_model = result.T_scene_model;
   int iterations = 0;
   const int stages = problem.dense_model ? 2 : 1;
@@ -623,13 +645,130 @@ PhaseCorrelationParams phase_params(const AlignParams& params) {
 
 }  // namespace detail
 
-AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignParams& params) {
+namespace {
+
+// Pixels of the single-view detection, in tolerances at the scene's median distance: finer
+// than the view check's half tolerance, so that a downsampled scan's far surfaces (several
+// points per pixel of half a voxel, seen at a slant) are not taken for hidden ones, and
+// coarse enough that the empty pixels between a full model's front points, filled from
+// their neighbours, still hide its back.
+constexpr double kDetectionPixel = 0.25;
+
+// The share of the scene that a sensor at `origin` sees, on the range image `image` made
+// from there.
+double visible_share(const PointCloud& scene, const RangeImage& image, double tolerance) {
+  const detail::ViewCheck seen =
+      image.check(scene.points(), scene.normals(), tolerance, RangeImage::Distance::along_normal);
+  return double(seen.surface_points) / double(scene.size());
+}
+
+// Where the sensor of the scene is, and whether the scene is one view from there.
+struct SceneSensor {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  SceneView view = SceneView::automatic;
+};
+
+SceneSensor scene_sensor(const AlignParams& params) {
+  if (params.scene_viewpoint) return {*params.scene_viewpoint, SceneView::single_view};
+  return {params.sensor_origin, params.scene_view};
+}
+
+}  // namespace
+
+namespace detail {
+
+std::optional<Eigen::Vector3d> declared_viewpoint(const AlignParams& params) {
+  const SceneSensor sensor = scene_sensor(params);
+  if (sensor.view != SceneView::single_view) return std::nullopt;
+  return sensor.origin;
+}
+
+}  // namespace detail
+
+namespace {
+
+// The range image of a single view (half-voxel pixels: a model point a voxel in front of
+// or behind the scan is resolved), or none for a scene seen from all sides or one that
+// the detection does not find to be a single view.
+std::optional<RangeImage> single_view_image(const PointCloud& scene, const AlignParams& params) {
+  const SceneSensor sensor = scene_sensor(params);
+  if (sensor.view == SceneView::all_sides) return std::nullopt;
+  if (sensor.view == SceneView::automatic &&
+      !detect_single_view(scene, sensor.origin, params.voxel_size).single_view)
+    return std::nullopt;
+  return RangeImage(scene, sensor.origin, 0.5 * params.voxel_size);
+}
+
+// Turn between two rotations, degrees.
+double turn_deg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  const double c = std::clamp(0.5 * ((a.transpose() * b).trace() - 1.0), -1.0, 1.0);
+  return std::acos(c) * 180.0 / M_PI;
+}
+
+// The initial guess as a hypothesis, ranked with the search's; with a neighbourhood, the
+// search's hypotheses outside it are dropped.
+void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses,
+                     double tolerance) {
+  const AlignParams& params = problem.params;
+  Hypothesis guess;
+  guess.index = -1;
+  guess.pose = problem.model.pose_of(params.initial_guess);
+  guess.fitness = problem.model.fitness(problem.scene, problem.view, guess.pose, tolerance);
+  const Eigen::Vector3d centre = problem.model.centre(guess.pose);
+  const auto outside = [&](const Hypothesis& h) {
+    return (params.guess_angle_deg > 0.0 &&
+            turn_deg(h.pose.R, guess.pose.R) > params.guess_angle_deg) ||
+           (params.guess_distance > 0.0 &&
+            (problem.model.centre(h.pose) - centre).norm() > params.guess_distance);
+  };
+  hypotheses.erase(std::remove_if(hypotheses.begin(), hypotheses.end(), outside), hypotheses.end());
+  hypotheses.push_back(guess);
+  rank(hypotheses);
+}
+
+// With guess_distance: the parts of the scene that the model could reach from the guess.
+void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
+                           std::vector<std::vector<Eigen::Index>>& parts) {
+  const AlignParams& params = problem.params;
+  if (!(params.guess_distance > 0.0)) return;
+  const Eigen::Vector3d centre = problem.model.centre(problem.model.pose_of(params.initial_guess));
+  const double reach = params.guess_distance + problem.model.reach();
+  const auto far = [&](const std::vector<Eigen::Index>& part) {
+    for (const Eigen::Index i : part)
+      if ((searched.points().row(i).transpose() - centre).norm() <= reach) return false;
+    return true;
+  };
+  parts.erase(std::remove_if(parts.begin(), parts.end(), far), parts.end());
+}
+
+}  // namespace
+
+SingleViewEvidence detect_single_view(const PointCloud& scene, const Eigen::Vector3d& sensor_origin,
+                                      double tolerance) {
+  require_non_empty(scene, "scene");
+  require_normals(scene, "scene");
+  if (!sensor_origin.allFinite()) fail("sensor_origin must be finite");
+  detail::require_positive_finite(tolerance, "tolerance");
+  SingleViewEvidence evidence;
+  try {
+    const RangeImage image(scene, sensor_origin, kDetectionPixel * tolerance);
+    evidence.visible = visible_share(scene, image, tolerance);
+  } catch (const std::invalid_argument&) {
+    evidence.visible = 0.0;  // nothing in front of the origin, or the origin at the centroid
+  }
+  evidence.single_view = evidence.visible >= single_view_threshold;
+  return evidence;
+}
+
+AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignParams& given) {
   require_non_empty(model, "model");
   require_non_empty(scene, "scene");
   require_normals(model, "model");
   require_normals(scene, "scene");
-  check_params(params);
-  const Clock::time_point deadline = deadline_of(params, Clock::now());
+  check_params(given);
+  const Clock::time_point deadline = deadline_of(given, Clock::now());
+  AlignParams params = given;
+  if (params.voxel_size == 0.0) params.voxel_size = alignment_voxel_size(model, scene);
   MovingModel moving(model);
   // Beyond the paper: a table under the objects dominates both the scene's EGI and its
   // voxel grid; searched without it, the object stands out. Fitness still sees it.
@@ -645,15 +784,20 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   const ShCoefficients scene_coefficients =
       egi_coefficients(searched, params.bandwidth, params.egi_method);
   So3Correlation correlation(scene_coefficients, model_coefficients, params.bandwidth, true);
-  // Half-voxel pixels: a model point a voxel in front of or behind the scan is resolved.
-  std::optional<RangeImage> view;
-  if (params.scene_viewpoint) view.emplace(scene, *params.scene_viewpoint, 0.5 * params.voxel_size);
+  const std::optional<RangeImage> view = single_view_image(scene, params);
   const RangeImage* view_ptr = view ? &*view : nullptr;
+  const std::optional<Eigen::Vector3d> viewpoint =
+      view ? std::optional<Eigen::Vector3d>(scene_sensor(params).origin) : std::nullopt;
+  const auto finish = [&](AlignResult result) {
+    result.voxel_size = params.voxel_size;
+    result.single_view = view.has_value();
+    return result;
+  };
 
   if (!params.global_search) {
     const Problem problem{
-        scene_map, view_ptr, moving, model_coefficients, params, window_margin(0.0, params),
-        deadline};
+        scene_map, view_ptr,     moving, model_coefficients, params, window_margin(0.0, params),
+        deadline,  std::nullopt, true,   viewpoint};
     const Pose start = moving.pose_of(params.initial_guess);
     SceneTranslation whole_scene =
         params.max_translation > 0.0
@@ -666,38 +810,50 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     SceneThenWindow source(problem, whole_scene, window);
     AlignResult result = run_algorithm1(problem, correlation, scene_coefficients, start, source,
                                         params.max_iterations);
-    detail::set_verification(result,
-                             detail::Verifier(scene, params.voxel_size, params.scene_viewpoint)
-                                 .verify(model, result.T_scene_model));
-    return result;
+    detail::set_verification(result, detail::Verifier(scene, params.voxel_size, viewpoint)
+                                         .verify(model, result.T_scene_model));
+    return finish(std::move(result));
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis = flat_axis(model_coefficients, params.bandwidth);
   const bool dense = points_per_voxel(model.points(), params.voxel_size) >= kPolishMinDensity;
-  const Problem problem{scene_map,          view_ptr, moving,
-                        model_coefficients, params,   window_margin(search_voxel, params),
-                        deadline,           axis,     dense};
+  const Problem problem{
+      scene_map, view_ptr, moving, model_coefficients, params, window_margin(search_voxel, params),
+      deadline,  axis,     dense,  viewpoint};
   std::optional<TranslationWindow> window;
   std::vector<std::vector<Eigen::Index>> parts;
   if (plane) {
     parts = object_parts(searched, plane, moving.reach(), params.voxel_size);
+    keep_parts_near_guess(problem, searched, parts);
   } else if (view) {
     parts.push_back(whole_view(searched));
   }
   std::vector<Hypothesis> hypotheses;
-  if (parts.empty()) {
+  if (parts.empty() && !(plane && params.guess_distance > 0.0)) {
     hypotheses = global_hypotheses(problem, correlation, scene_coefficients, search_voxel);
+    seed_with_guess(problem, hypotheses, search_voxel);
   } else {
     const int per_part = plane ? std::max(1, params.hypotheses / 2) : params.hypotheses;
     hypotheses = part_hypotheses(problem, parts, per_part, window);
+    seed_with_guess(problem, hypotheses, params.voxel_size);
     turn_about_flat_axis(problem, hypotheses, params.voxel_size);
   }
+  // The refined hypotheses: the fittest, and with a neighbourhood always the guess.
+  std::vector<const Hypothesis*> refined;
+  const std::size_t runs =
+      std::min<std::size_t>(std::size_t(params.refinements), hypotheses.size());
+  for (std::size_t i = 0; i < runs; ++i) refined.push_back(&hypotheses[i]);
+  if (has_neighbourhood(params)) {
+    const auto guess = std::find_if(hypotheses.begin(), hypotheses.end(),
+                                    [](const Hypothesis& h) { return h.index == -1; });
+    if (guess != hypotheses.end() && std::size_t(guess - hypotheses.begin()) >= runs)
+      refined.push_back(&*guess);
+  }
   AlignResult best;
-  const int runs = std::min<int>(params.refinements, static_cast<int>(hypotheses.size()));
   bool out_of_time = false;
-  for (int i = 0; i < runs && !out_of_time; ++i) {
+  for (std::size_t i = 0; i < refined.size() && !out_of_time; ++i) {
     AlignResult result =
-        refine_hypothesis(problem, correlation, scene_coefficients, hypotheses[i], window);
+        refine_hypothesis(problem, correlation, scene_coefficients, *refined[i], window);
     // Fitness tells a mug upright from upside down only with its handle in place, and a
     // view's fitness a pose from its near-symmetric flip only at a precise pose: each
     // result is swept and refined before they are compared.
@@ -724,15 +880,15 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     if (params.icp_refinement) refine_with_icp(problem, model, scene, best);
   }
   best.search_voxel_size = search_voxel;
-  const detail::Verifier verifier(scene, params.voxel_size, params.scene_viewpoint);
+  const detail::Verifier verifier(scene, params.voxel_size, viewpoint);
   detail::set_verification(best, verifier.verify(model, best.T_scene_model));
   if (!out_of_time) {
     detail::AlternativeSources sources{model_coefficients, params.bandwidth, axis, {}};
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
-    detail::find_alternatives(model, verifier, sources, params, best);
+    detail::find_alternatives(model, verifier, sources, params, viewpoint, best);
   }
-  return best;
+  return finish(std::move(best));
 }
 
 }  // namespace spectral_vs

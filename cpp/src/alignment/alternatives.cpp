@@ -86,7 +86,7 @@ bool apart(const Transform& a, const Transform& b, const Eigen::Vector3d& centro
 
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
                        const AlternativeSources& sources, const AlignParams& params,
-                       AlignResult& result) {
+                       const std::optional<Eigen::Vector3d>& viewpoint, AlignResult& result) {
   result.alternatives.clear();
   result.ambiguous = false;
   if (params.max_alternatives == 0) return;
@@ -140,11 +140,11 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   candidates.resize(std::min<std::size_t>(
       candidates.size(), std::size_t(kRefinedPerAlternative * params.max_alternatives)));
   IcpSettings icp;
-  icp.viewpoint = params.scene_viewpoint;
+  icp.viewpoint = viewpoint;
   for (Candidate& candidate : candidates) {
     if (candidate.turn) {
       candidate.T = refine_translation(model, verifier.grid(), candidate.T, params.voxel_size,
-                                       params.scene_viewpoint);
+                                       viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
       continue;
     }

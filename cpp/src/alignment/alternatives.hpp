@@ -23,10 +23,11 @@ struct AlternativeSources {
 /// The poses apart from `result`'s (rotation over kApartDegrees or model centroid over
 /// kApartMetres) and from each other, whose confidence is within kAlternativeMargin of
 /// result.confidence, each refined by point-to-plane ICP and verified; best first, at most
-/// params.max_alternatives. Sets result.alternatives and result.ambiguous.
+/// params.max_alternatives; the ICP sees the scene as a single view from `viewpoint` when
+/// there is one. Sets result.alternatives and result.ambiguous.
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
                        const AlternativeSources& sources, const AlignParams& params,
-                       AlignResult& result);
+                       const std::optional<Eigen::Vector3d>& viewpoint, AlignResult& result);
 
 /// Rotation apart, degrees, and model centroid apart, metres: the success tolerances.
 inline constexpr double kApartDegrees = 5.0;

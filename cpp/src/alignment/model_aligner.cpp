@@ -72,8 +72,9 @@ struct ModelAligner::Impl {
   double fitness(const PointCloud& scene, const GridSpec& map, const Pose& pose) {
     const Points& normals = moving_model->turned_normals(pose);
     const Points& points = move(pose);
-    if (!params.scene_viewpoint) return fitness_map.fitness(scene, map, points, normals);
-    const detail::RangeImage view(scene, *params.scene_viewpoint,
+    const std::optional<Eigen::Vector3d> viewpoint = detail::declared_viewpoint(params);
+    if (!viewpoint) return fitness_map.fitness(scene, map, points, normals);
+    const detail::RangeImage view(scene, *viewpoint,
                                   0.5 * params.voxel_size);  // as align() makes it
     return view.check(points, normals, params.voxel_size).fitness();
   }
@@ -169,7 +170,7 @@ struct ModelAligner::Impl {
     t = Clock::now();
     result.fitness = fitness(scene, map, pose);
     detail::set_verification(result,
-                             detail::Verifier(scene, params.voxel_size, params.scene_viewpoint)
+                             detail::Verifier(scene, params.voxel_size, detail::declared_viewpoint(params))
                                  .verify(model, result.T_scene_model));
     timings.fitness = seconds_since(t);
     return result;
@@ -184,11 +185,15 @@ ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
   Impl& im = *impl_;
   im.model = model;
   im.params = params;
+  if (params.voxel_size == 0.0) im.params.voxel_size = alignment_voxel_size(model, model);
+  // A tracker checks a view only when it is declared: 'automatic' is all sides here.
+  if (params.scene_view == SceneView::automatic && !detail::declared_viewpoint(params))
+    im.params.scene_view = SceneView::all_sides;
   im.moving_model.emplace(model);
   im.model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
   if (im.local()) {
     im.max_shift = Eigen::Vector3i::Constant(
-        detail::voxels_along(params.max_translation, params.voxel_size, params.limits));
+        detail::voxels_along(params.max_translation, im.params.voxel_size, params.limits));
   }
 }
 

@@ -148,6 +148,7 @@ ViewCheck RangeImage::check(const Points& points, const Points& normals, double 
                                           point_[k])) <= tolerance;
     const bool same_way =
         on_surface && normal_[k].dot(normals.row(model_[i].row).transpose().cast<float>()) > turned;
+    if (on_surface) ++result.surface_points;
     if (same_way) ++result.supported_points;
     if (i > 0 && model_[i].u == model_[i - 1].u && model_[i].v == model_[i - 1].v) continue;
     if (on_surface) {

@@ -21,6 +21,9 @@ struct ViewCheck {
   /// Model points, each (not only the nearest of its pixel), within the tolerance of the
   /// scan's depth at their pixel and turned its way within 45 degrees.
   int supported_points = 0;
+  /// Model points, each, on the scanned surface of their pixel (as above, whatever their
+  /// normal).
+  int surface_points = 0;
 
   /// confirmed / (confirmed + contradicted + hidden / 2), in [0, 1]: a hidden pixel
   /// neither confirms nor refutes a pose, but a pose tucked behind other surfaces should

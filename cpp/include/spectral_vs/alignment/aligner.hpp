@@ -23,9 +23,19 @@ enum class RotationStep {
              ///< definite, the gradient law elsewhere: the same fixed point, fewer iterations.
 };
 
+/// What the scene is to its sensor (AlignParams::scene_view).
+enum class SceneView {
+  automatic,    ///< A single view from sensor_origin if `detect_single_view` finds one
+                ///< (a depth camera's cloud in its own frame), else seen from all sides.
+  single_view,  ///< A single view from sensor_origin (declared).
+  all_sides,    ///< Seen from all sides (a full model, a fused map): no view check.
+};
+
 /// Settings of `align`. Defaults are the ones measured best here (docs/experiments.md).
 struct AlignParams {
-  double voxel_size = 0.008;      ///< Voxel edge r of the translation grid, metres.
+  /// Voxel edge r of the translation grid, metres; 0: derived from the model by
+  /// `alignment_voxel_size` (its typical size / 12, at least its point spacing).
+  double voxel_size = 0.0;
   int bandwidth = 16;             ///< B: EGI harmonics of degree l < B are correlated.
   double translation_gain = 0.5;  ///< lambda_t in (0, 1]: share of the phase-correlation
                                   ///< shift applied per iteration (eq. 16).
@@ -46,7 +56,18 @@ struct AlignParams {
   /// converged = false and stop_reason = max_seconds (the one setting whose result depends
   /// on the machine's speed).
   double max_seconds = 0.0;
-  Transform initial_guess = Transform::Identity();  ///< T_scene_model to start from.
+  /// T_scene_model to start from. Without global search, Algorithm 1 starts here. With
+  /// it, the guess seeds the search: it is verified and ranked with the search's
+  /// hypotheses, and with a neighbourhood (guess_angle_deg, guess_distance) it is always
+  /// refined and only the hypotheses inside the neighbourhood are kept.
+  Transform initial_guess = Transform::Identity();
+  /// With global search: the largest rotation from initial_guess that is searched,
+  /// degrees, in [0, 180]; 0: no limit.
+  double guess_angle_deg = 0.0;
+  /// With global search: the largest distance of the model's centroid from where
+  /// initial_guess puts it that is searched, metres, >= 0; 0: no limit. With a limit, the
+  /// parts of a cluttered scene farther than this plus the model's reach are not searched.
+  double guess_distance = 0.0;
   bool global_search = true;  ///< Start from the best rotations of the SO(3) search
                               ///< (beyond the paper) instead of the initial guess's.
   int hypotheses = 48;        ///< Rotations of the global search that are placed and verified:
@@ -69,10 +90,17 @@ struct AlignParams {
                                    ///< (not by the model's reach), all iterations run on it, and
                                    ///< farther phase-correlation peaks are ignored: for two views
                                    ///< of one scene, as in servoing. 0: unbounded (the paper).
-  /// The sensor origin of a single-view scene, scene coordinates, metres: fitness then
+  /// Where the scene's sensor was, scene coordinates, metres: the origin for a depth
+  /// camera's cloud in its own frame. Python orients estimated normals toward it.
+  Eigen::Vector3d sensor_origin = Eigen::Vector3d::Zero();
+  /// Whether the scene is a single view from sensor_origin. For a single view, fitness
   /// checks a pose against what the view saw (AlignResult::fitness), which tells a pose
-  /// from its flip. With global search and no support plane, the whole view is searched
-  /// as one part (below). Unset for a scene seen from all sides.
+  /// from its flip; with global search and no support plane, the whole view is searched
+  /// as one part (below). Default: detected (`detect_single_view`).
+  SceneView scene_view = SceneView::automatic;
+  /// Deprecated, kept for one release (not marked [[deprecated]]: every copy of the
+  /// settings would warn): set means scene_view = single_view from this origin,
+  /// overriding sensor_origin and scene_view.
   std::optional<Eigen::Vector3d> scene_viewpoint;
   /// With global search: search the scene without its support plane (a plane of one
   /// normal direction wider than 4 model reaches holding over a fifth of the points, e.g.
@@ -124,6 +152,9 @@ enum class AlignStopReason {
   converged,       ///< The stop rule (eq. 17) held.
   max_iterations,  ///< AlignParams::max_iterations ran out.
   max_seconds,     ///< AlignParams::max_seconds ran out.
+  kept_start,      ///< With global search: Algorithm 1 ended less fit than the hypothesis it
+                   ///< started from, and the hypothesis's pose was kept (its run is not
+                   ///< the returned pose's: iterations 0, history empty).
 };
 
 /// One iteration of Algorithm 1, recorded after its update.
@@ -152,10 +183,13 @@ struct AlignAlternative {
 /// Outcome of `align`.
 struct AlignResult {
   Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
-  bool converged = false;  ///< The stop rule (eq. 17) held before max_iterations
-                           ///< (and, with global search, all runs finished in time).
+  /// The stop rule (eq. 17) held in the Algorithm 1 run that produced the returned pose,
+  /// before its iteration limit (and, with global search, every run finished in time).
+  /// With global search that run started at the kept hypothesis (`hypothesis`); the pose
+  /// is then turned about a flat axis and ICP-refined (polish_evaluations, icp_iterations).
+  bool converged = false;
   AlignStopReason stop_reason = AlignStopReason::max_iterations;  ///< Why it stopped.
-  int iterations = 0;  ///< Iterations of Algorithm 1 in the kept run.
+  int iterations = 0;  ///< Iterations of that run: history.size().
   /// How well the scene supports the final pose, in [0, 1]: high for a correct alignment,
   /// low for a wrong one. Without scene_viewpoint: the fraction of the model's occupied
   /// voxels that lie within one voxel of scene points with a normal within about 50
@@ -168,14 +202,17 @@ struct AlignResult {
   double fitness = 0.0;
   double correlation = 0.0;       ///< Final normalised EGI correlation C(R).
   double translation_peak = 0.0;  ///< Final phase-correlation peak height.
-  int hypothesis = 0;             ///< Index of the kept global-search hypothesis (0 without).
+  /// Index of the kept global-search hypothesis (0 without; -1: the initial guess).
+  int hypothesis = 0;
   /// The voxel sizes the alignment worked at, metres: the global search's translation
   /// grid (0 without global search) and the windows of Algorithm 1.
   double search_voxel_size = 0.0;
   Eigen::Vector3i window_dims = Eigen::Vector3i::Zero();  ///< Voxels of the local window.
   int polish_evaluations = 0;  ///< Phase correlations of the final polish (0 without).
   int icp_iterations = 0;      ///< Steps of the ICP refinement (0 without, or if not kept).
-  std::vector<AlignIteration> history;  ///< Every iteration of the kept run.
+  /// Every iteration of that run; history.back().T_scene_model is where Algorithm 1
+  /// ended, T_scene_model that pose after the polish and ICP (equal without them).
+  std::vector<AlignIteration> history;
   /// The confidence that the pose is right, in [0, 1] (verify_pose, confidence_of): the
   /// share of the model points the sensor would see that lie within a quarter voxel of a
   /// scene point turned the same way, less the share it saw through. Above
@@ -193,6 +230,9 @@ struct AlignResult {
   /// True when there is an alternative: the scene does not tell the pose apart from
   /// another one (a symmetric object, or a view that hides its distinguishing part).
   bool ambiguous = false;
+  double voxel_size = 0.0;   ///< The voxel the alignment worked at, metres (derived for 0).
+  bool single_view = false;  ///< The scene was checked as a single view from sensor_origin
+                             ///< (declared, or detected: `detect_single_view`).
 };
 
 /// A confidence above this separates right from wrong poses: the balanced threshold
@@ -201,6 +241,40 @@ struct AlignResult {
 /// and rejected 96% of the wrong ones; docs/experiments.md "Confidence" reports it on
 /// more cases and on the held-out objects.
 inline constexpr double kConfidenceThreshold = 0.85;
+
+/// The default voxel of `align` for `voxel_size = 0`, metres: the rule of `view_scale`
+/// applied to the model, max(extent / 12, extent / sqrt(N)) with extent its typical size
+/// (twice the median distance of its points from their median) and N its points: about
+/// 8 mm for the household objects of docs/experiments.md (typical sizes 0.08-0.15 m),
+/// 0.2-0.3 m for a view of a room (docs/alignment.md gives the measurement). A model of
+/// one place (one point, coincident points) takes the scene's typical size instead.
+/// @throws std::invalid_argument for an empty cloud, or when neither spans a volume.
+double alignment_voxel_size(const PointCloud& model, const PointCloud& scene);
+
+/// The evidence that `scene` is a single view from `sensor_origin`.
+struct SingleViewEvidence {
+  /// Share of the scene's points that a sensor at the origin sees: in front of it (within
+  /// about 72 degrees of the direction to the centroid), facing it, and the nearest
+  /// surface along their ray (within `tolerance` of the plane of the nearest point of
+  /// their pixel, normals within 45 degrees), in [0, 1].
+  double visible = 0.0;
+  bool single_view = false;  ///< visible >= single_view_threshold.
+};
+
+/// The share `detect_single_view` requires. Measured on the experiment families
+/// (docs/alignment.md): a depth camera's cloud in its frame sees 0.988-1 of its points
+/// (simulated single views and clutter, the real Kinect scene), a full model 0.13-0.47
+/// of its own from outside, a scene in a world frame (sensor elsewhere) 0-0.07, a single
+/// scan moved away from its sensor 0.25-0.94.
+constexpr double single_view_threshold = 0.95;
+
+/// Whether `scene` is a single view from `sensor_origin`: all its points visible from
+/// there, within `tolerance` metres (the alignment uses its voxel). A scene seen from all
+/// sides hides its far side from any one point outside it.
+/// @throws std::invalid_argument for an empty scene, missing normals, a non-finite
+///         origin or a tolerance that is not finite and positive.
+SingleViewEvidence detect_single_view(const PointCloud& scene, const Eigen::Vector3d& sensor_origin,
+                                      double tolerance);
 
 /// Aligns `model` onto `scene`: the returned T_scene_model moves the model's points onto
 /// the scene. Both clouds need normals. Rotation is about the model's centroid.

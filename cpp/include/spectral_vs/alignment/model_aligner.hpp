@@ -35,6 +35,10 @@ struct ModelAlignerTimings {
 /// and spectrum, the iterations, and the fitness at the final pose (the same value as
 /// align()'s, from a map of the scene only around the model there). In the other modes
 /// (global search, or the unbounded translation of the paper) each call runs `align`.
+/// Two settings are resolved once, at construction (params() returns them resolved): a
+/// voxel_size of 0 is derived from the model (`alignment_voxel_size`), and scene_view
+/// 'automatic' becomes 'all_sides' (a tracker checks a view only when it is declared, so
+/// that its steps do not switch between the two fitness measures from scene to scene).
 ///
 /// Threads: `align` may be called on one object from several threads; the calls share
 /// the object's buffers and so run one after the other (each waits for the running one),
