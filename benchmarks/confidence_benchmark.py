@@ -15,8 +15,8 @@ Two measurements in one run, on cases of ``benchmarks/cases.py``:
   and KISS-Matcher + ICP (``benchmarks/peers.py``; skipped when not installed). No
   default of the library was chosen by looking at these objects.
 
-Single views pass the sensor origin as ``scene_viewpoint``, as ``benchmarks/experiments.py``
-does. Writes ``benchmarks/results/confidence.json``, ``docs/figures/confidence_roc.png``
+Single views declare their sensor (``sensor_origin``, ``scene_view='single_view'``).
+Writes ``benchmarks/results/confidence.json``, ``docs/figures/confidence_roc.png``
 and the tables between the ``confidence`` and ``heldout`` markers of docs/experiments.md.
 Usage (rerun after any change of the defaults; one command)::
 
@@ -130,13 +130,12 @@ def record_of(case: case_lib.Case, run: str, result, seconds: float, wrong: bool
     }
 
 
-def features(model, case: case_lib.Case, T: np.ndarray, viewpoint) -> dict:
-    """The verification's counts at the returned pose, and at twice the voxel."""
+def features(model, case: case_lib.Case, result: svs.AlignResult, view: dict) -> dict:
+    """The verification's counts at the returned pose, at its voxel and at twice that."""
     out = {}
-    for key, voxel in (("", 0.008), ("coarse_", 0.016)):
-        v = svs.verify_pose(
-            model, case.scene_cloud(), T, voxel_size=voxel, scene_viewpoint=viewpoint
-        )
+    T = result.T_scene_model
+    for key, voxel in (("", result.voxel_size), ("coarse_", 2 * result.voxel_size)):
+        v = svs.verify_pose(model, case.scene_cloud(), T, voxel_size=voxel, **view)
         out |= {
             key + k: getattr(v, k)
             for k in ("visible", "tight", "seen_through", "hidden", "inliers")
@@ -146,9 +145,11 @@ def features(model, case: case_lib.Case, T: np.ndarray, viewpoint) -> dict:
 
 
 def run_case(case: case_lib.Case, with_peers: bool) -> list[dict]:
-    settings = {"threads": 1}
+    settings: dict = {"threads": 1}
+    view: dict = {"scene_view": "all_sides"}
     if np.all(np.isfinite(case.viewpoint)):
-        settings["scene_viewpoint"] = case.viewpoint
+        view = {"sensor_origin": case.viewpoint, "scene_view": "single_view"}
+    settings |= view
     records = []
     for run in RUNS:
         model, wrong = case.model_cloud(), False
@@ -163,7 +164,7 @@ def run_case(case: case_lib.Case, with_peers: bool) -> list[dict]:
         start = time.process_time()
         result = svs.align(model, case.scene_cloud(), **settings, **extra)
         record = record_of(case, run, result, time.process_time() - start, wrong)
-        record |= features(model, case, result.T_scene_model, settings.get("scene_viewpoint"))
+        record |= features(model, case, result, view)
         records.append(record)
     if with_peers and case.family in case_lib.HELDOUT_FAMILIES:
         records += peer_records(case)

@@ -14,8 +14,8 @@ from __future__ import annotations
 import os
 
 from spectral_vs._core import (
-    AlignAlternative,
     SINGLE_VIEW_THRESHOLD,
+    AlignAlternative,
     AlignIteration,
     AlignParams,
     AlignResult,
@@ -39,8 +39,8 @@ from spectral_vs._core import (
     ViewScale,
     ViewSupport,
     VoxelGrid,
-    cloud_from_depth,
     alignment_voxel_size,
+    cloud_from_depth,
     damped_least_squares,
     detect_single_view,
     egi,
@@ -120,8 +120,8 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
 __all__ = [
     "CONFIDENCE_THRESHOLD",
-    "AlignAlternative",
     "SINGLE_VIEW_THRESHOLD",
+    "AlignAlternative",
     "AlignIteration",
     "AlignParams",
     "AlignResult",
@@ -155,8 +155,8 @@ __all__ = [
     "VoxelGrid",
     "align",
     "align_views",
-    "cloud_from_depth",
     "alignment_voxel_size",
+    "cloud_from_depth",
     "damped_least_squares",
     "detect_single_view",
     "egi",

@@ -69,22 +69,22 @@ def test_moving_the_model_moves_its_inliers_with_it():
 def test_verify_pose_names_bad_arguments():
     scene = cloud([[0, 0, 0], [0.1, 0, 0]], [UP] * 2)
     with pytest.raises(ValueError, match="voxel_size"):
-        svs.verify_pose(scene, scene, np.eye(4), voxel_size=0.0, downsample=False)
+        svs.verify_pose(scene, scene, np.eye(4), voxel_size=-0.01, downsample=False)
     skewed = np.eye(4)
     skewed[0, 1] = 0.5
     with pytest.raises(ValueError, match="T_scene_model"):
         svs.verify_pose(scene, scene, skewed, downsample=False)
-    with pytest.raises(ValueError, match="viewpoint"):
-        svs.verify_pose(scene, scene, np.eye(4), scene_viewpoint=(0, math.nan, 0))
+    with pytest.raises(ValueError, match="sensor_origin"):
+        svs.verify_pose(scene, scene, np.eye(4), sensor_origin=(0, math.nan, 0))
+    with pytest.raises(ValueError, match="scene_view"):
+        svs.verify_pose(scene, scene, np.eye(4), scene_view="one_view")
 
 
 def test_align_reports_what_verify_pose_measures():
     case = cases.make_case(cases.CaseSpec("partial", "duck", 60.0, 0))
-    result = svs.align(case.model_cloud(), case.scene_cloud(), scene_viewpoint=case.viewpoint)
-    v = svs.verify_pose(
-        case.model_cloud(), case.scene_cloud(), result.T_scene_model,
-        scene_viewpoint=case.viewpoint,
-    )  # fmt: skip
+    view = {"voxel_size": 0.008, "sensor_origin": case.viewpoint, "scene_view": "single_view"}
+    result = svs.align(case.model_cloud(), case.scene_cloud(), **view)
+    v = svs.verify_pose(case.model_cloud(), case.scene_cloud(), result.T_scene_model, **view)
     assert result.confidence == pytest.approx(v.confidence, abs=1e-12)
     assert result.inliers == v.inliers
     assert result.inlier_rmse == pytest.approx(v.inlier_rmse, abs=1e-12)
@@ -96,9 +96,7 @@ def test_align_reports_what_verify_pose_measures():
     wrong = result.T_scene_model @ cases.rotation_about(
         cases.axis_angle(np.array([1.0, 0.0, 0.0]), math.pi / 2), case.model_center
     )
-    w = svs.verify_pose(
-        case.model_cloud(), case.scene_cloud(), wrong, scene_viewpoint=case.viewpoint
-    )
+    w = svs.verify_pose(case.model_cloud(), case.scene_cloud(), wrong, **view)
     assert w.confidence < svs.CONFIDENCE_THRESHOLD
 
 
@@ -165,7 +163,7 @@ def mug_without_its_handle() -> tuple[svs.PointCloud, svs.PointCloud, np.ndarray
 
 def test_a_mug_seen_without_its_handle_is_ambiguous_and_reports_the_true_pose():
     model, scene, eye = mug_without_its_handle()
-    result = svs.align(model, scene, scene_viewpoint=eye)
+    result = svs.align(model, scene, sensor_origin=eye, scene_view="single_view")
     assert result.ambiguous
     assert truth_among(result, np.eye(4), np.zeros(3))
 
