@@ -29,8 +29,16 @@ constexpr double kMinInlierShare = 0.5;
 struct Candidate {
   Transform T = Transform::Identity();
   PoseVerification verification;
-  bool turn = false;  // a turn about the flat axis: its rotation is kept (see below)
+  bool turn = false;   // a turn about the flat axis: its rotation is kept (see below)
+  double angle = 0.0;  // of the turn, radians
 };
+
+// A turn about the flat axis is an alternative only where the confidence is flat along
+// the turn: the pose turned half as far may score at most this much more. A body of
+// revolution scores alike at every turn; an object that is not one (a duck at a coarse
+// voxel) falls off from the returned pose, and a turn that only keeps within the margin
+// of it is the tail of that one peak, not a second pose.
+constexpr double kTurnFlatness = 0.01;
 
 // Point-to-plane steps of the translation alone. A turn about a flat EGI axis is refined
 // so: a full ICP slides along the surface's free turn (a mug whose handle is hidden) and
@@ -95,6 +103,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
 
   std::vector<Transform> poses;
   std::vector<char> turns;
+  std::vector<double> angles;  // of the turns about the flat axis, 0 for the others
   try {
     So3Correlation self(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
                         true);
@@ -108,6 +117,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
       if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
         poses.push_back(turned(T, R, c));
         turns.push_back(0);
+        angles.push_back(0.0);
       }
     }
   } catch (const std::invalid_argument&) {
@@ -118,11 +128,13 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     for (int k = 1; k < count; ++k) {
       poses.push_back(turned(T, exp_so3(double(k) * kAxisStep * *sources.flat_axis), c));
       turns.push_back(1);
+      angles.push_back(double(k) * kAxisStep);
     }
   }
   for (std::size_t h = 0; h < std::min(kHypotheses, sources.hypotheses.size()); ++h) {
     poses.push_back(sources.hypotheses[h]);
     turns.push_back(0);
+    angles.push_back(0.0);
   }
 
   // The likeliest by inliers first (cheap), then refined as the returned pose was.
@@ -130,7 +142,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   for (std::size_t k = 0; k < poses.size(); ++k) {
     const Transform& pose = poses[k];
     if (!apart(pose, T, c)) continue;
-    Candidate candidate{pose, verifier.verify(model, pose), turns[k] != 0};
+    Candidate candidate{pose, verifier.verify(model, pose), turns[k] != 0, angles[k]};
     if (candidate.verification.inliers >= kMinInlierShare * result.inliers)
       candidates.push_back(candidate);
   }
@@ -143,9 +155,17 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   icp.viewpoint = viewpoint;
   for (Candidate& candidate : candidates) {
     if (candidate.turn) {
-      candidate.T = refine_translation(model, verifier.grid(), candidate.T, params.voxel_size,
-                                       viewpoint);
+      candidate.T =
+          refine_translation(model, verifier.grid(), candidate.T, params.voxel_size, viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
+      // The angle wraps: half of a turn past half a revolution is taken the short way.
+      const double angle = candidate.angle > M_PI ? candidate.angle - 2.0 * M_PI : candidate.angle;
+      const Transform half = refine_translation(
+          model, verifier.grid(), turned(T, exp_so3(0.5 * angle * *sources.flat_axis), c),
+          params.voxel_size, viewpoint);
+      if (verifier.verify(model, half).confidence >
+          candidate.verification.confidence + kTurnFlatness)
+        candidate.verification.confidence = 0.0;  // not flat: the tail of the one peak
       continue;
     }
     for (const double distance : {1.0, 0.4}) {
