@@ -25,6 +25,19 @@ constexpr std::size_t kHypotheses = 8;
 constexpr int kRefinedPerAlternative = 2;
 // A candidate is dropped before the ICP below this share of the returned pose's inliers.
 constexpr double kMinInlierShare = 0.5;
+// Model points the pre-selection counts inliers on: every this-many-th.
+constexpr Eigen::Index kSparseStride = 8;
+
+// Every stride-th point (and normal) of `cloud`, at least its first.
+PointCloud every_nth(const PointCloud& cloud, Eigen::Index stride) {
+  const Eigen::Index n = (cloud.size() + stride - 1) / stride;
+  Points points(n, 3), normals(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    points.row(i) = cloud.points().row(i * stride);
+    normals.row(i) = cloud.normals().row(i * stride);
+  }
+  return PointCloud(points, normals);
+}
 
 struct Candidate {
   Transform T = Transform::Identity();
@@ -90,6 +103,19 @@ bool apart(const Transform& a, const Transform& b, const Eigen::Vector3d& centro
   return degrees > kApartDegrees || metres > kApartMetres;
 }
 
+// Whether the confidence is flat along the turn from the returned pose T to the turned
+// candidate: the pose turned half as far (the short way), refined in translation as the
+// candidate was, scores at most kTurnFlatness more than the candidate.
+bool flat_along_turn(const PointCloud& model, const Verifier& verifier, const Candidate& candidate,
+                     const Transform& T, const Eigen::Vector3d& c, const Eigen::Vector3d& axis,
+                     double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint) {
+  const double angle = candidate.angle > M_PI ? candidate.angle - 2.0 * M_PI : candidate.angle;
+  const Transform half = refine_translation(
+      model, verifier.grid(), turned(T, exp_so3(0.5 * angle * axis), c), voxel_size, viewpoint);
+  return verifier.verify(model, half).confidence <=
+         candidate.verification.confidence + kTurnFlatness;
+}
+
 }  // namespace
 
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
@@ -137,13 +163,17 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     angles.push_back(0.0);
   }
 
-  // The likeliest by inliers first (cheap), then refined as the returned pose was.
+  // The likeliest by inliers first, counted on every kSparseStride-th model point (the
+  // nearest-point queries of every candidate are most of this stage's time), then refined
+  // as the returned pose was.
+  const PointCloud sparse = every_nth(model, kSparseStride);
+  const int sparse_inliers = verifier.verify(sparse, T).inliers;
   std::vector<Candidate> candidates;
   for (std::size_t k = 0; k < poses.size(); ++k) {
     const Transform& pose = poses[k];
     if (!apart(pose, T, c)) continue;
-    Candidate candidate{pose, verifier.verify(model, pose), turns[k] != 0, angles[k]};
-    if (candidate.verification.inliers >= kMinInlierShare * result.inliers)
+    Candidate candidate{pose, verifier.verify(sparse, pose), turns[k] != 0, angles[k]};
+    if (candidate.verification.inliers >= kMinInlierShare * sparse_inliers)
       candidates.push_back(candidate);
   }
   std::stable_sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
@@ -158,14 +188,6 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
       candidate.T =
           refine_translation(model, verifier.grid(), candidate.T, params.voxel_size, viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
-      // The angle wraps: half of a turn past half a revolution is taken the short way.
-      const double angle = candidate.angle > M_PI ? candidate.angle - 2.0 * M_PI : candidate.angle;
-      const Transform half = refine_translation(
-          model, verifier.grid(), turned(T, exp_so3(0.5 * angle * *sources.flat_axis), c),
-          params.voxel_size, viewpoint);
-      if (verifier.verify(model, half).confidence >
-          candidate.verification.confidence + kTurnFlatness)
-        candidate.verification.confidence = 0.0;  // not flat: the tail of the one peak
       continue;
     }
     for (const double distance : {1.0, 0.4}) {
@@ -182,6 +204,9 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     if (int(result.alternatives.size()) == params.max_alternatives) break;
     if (candidate.verification.confidence < result.confidence - kAlternativeMargin) break;
     if (!apart(candidate.T, T, c)) continue;
+    if (candidate.turn && !flat_along_turn(model, verifier, candidate, T, c, *sources.flat_axis,
+                                           params.voxel_size, viewpoint))
+      continue;
     const bool distinct = std::all_of(
         result.alternatives.begin(), result.alternatives.end(),
         [&](const AlignAlternative& kept) { return apart(candidate.T, kept.T_scene_model, c); });
