@@ -218,14 +218,16 @@ class ServoParams:
         centroid, which a camera rotation adds to (30 degrees at 0.55 m: 0.28 m). 0: the
         paper's unbounded grid. Measured in docs/servoing.md.
     tracking_translation : float
-        Once the registration has locked on (the watchdog is armed), the search is bounded
+        Once the registration has locked on (the watchdog is armed), or from the step after
+        a relocalization was taken, the search is bounded
         by this instead of ``max_translation`` while the previous estimate, carried along
         the camera's measured motion, moves the reference's centroid by at most half of it
         from where the registration starts, m: near the goal the phase-correlation grid is
         then about 2 times smaller (measured 4.6 to 2.8 ms per registration with 0.1 m). A
-        second prepared reference keeps its own FFT plans. A bounded estimate whose
-        fitness is below ``watchdog_fitness`` is redone with ``max_translation`` (the
-        answer may lie beyond the bound: a jump that the watchdog must see). 0, or not
+        second prepared reference keeps its own FFT plans. Once locked on, a bounded
+        estimate whose fitness is below ``watchdog_fitness`` is redone with
+        ``max_translation`` (the answer may lie beyond the bound: a jump that the watchdog
+        must see); before, the estimate is the carried one. 0, or not
         below ``max_translation``: always ``max_translation``.
     max_depth : float
         Points farther than this along the optical axis are ignored (both clouds), m. The
