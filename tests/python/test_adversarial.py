@@ -1074,3 +1074,19 @@ def test_case_names_are_unique() -> None:
     names = [case.name for case in CASES]
     assert len(names) == len(set(names))
     assert all(re.fullmatch(r"[a-z][^\[\]]*", name) for name in names)
+
+
+def test_a_pcd_whose_first_line_is_a_vertical_tab_is_refused(tmp_path):
+    """PCL splits header lines on spaces, tabs and carriage returns only: to it a line of a
+    vertical tab is an unknown header line that ends the header, and its binary reader
+    then crashed (found by fuzz/pcd_fuzzer). The header check splits the same way."""
+    body = (
+        b"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\n"
+        b"HEIGHT 1\nPOINTS 1\nDATA binary\n" + np.zeros(3, dtype=np.float32).tobytes()
+    )
+    path = tmp_path / "vertical_tab.pcd"
+    path.write_bytes(b"\x0b\n" + body)
+    with pytest.raises(ValueError, match="not a PCD file"):
+        svs.load_cloud(str(path))
+    path.write_bytes(body)  # the same file without that line loads
+    assert len(svs.load_cloud(str(path))) == 1

@@ -38,10 +38,22 @@ Format format_from_extension(const std::string& path) {
   fail("path: unsupported extension '", ext, "' of ", path, " (supported: .pcd, .ply)");
 }
 
+// The tokens of a line as PCL's readers split it: on spaces, tabs and carriage returns
+// only. Other control bytes (a vertical tab, a form feed) are part of a token, so a line
+// of them is no empty line to PCL: it ends PCL's header there, and its binary reader then
+// crashed on the header it had (found by fuzz/pcd_fuzzer).
 std::vector<std::string> split(const std::string& line) {
-  std::istringstream in(line);
   std::vector<std::string> tokens;
-  for (std::string token; in >> token;) tokens.push_back(token);
+  std::string token;
+  for (const char c : line) {
+    if (c == ' ' || c == '\t' || c == '\r') {
+      if (!token.empty()) tokens.push_back(std::move(token));
+      token.clear();
+    } else {
+      token += c;
+    }
+  }
+  if (!token.empty()) tokens.push_back(std::move(token));
   return tokens;
 }
 
