@@ -2,6 +2,7 @@
 // What the fuzz targets share: the input written to a file (the readers take paths) and
 // a failure that libFuzzer records as a crash, with the reason printed.
 
+#include <spectral_vs/representation/cloud_io.hpp>
 #include <spectral_vs/representation/point_cloud.hpp>
 
 #include <unistd.h>
@@ -10,6 +11,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 #include <string>
 
 namespace spectral_vs::fuzz {
@@ -50,6 +52,31 @@ inline void check_cloud(const PointCloud& cloud) {
       const double norm = cloud.normals().row(i).norm();
       check(std::abs(norm - 1.0) < 1e-6, "a loaded normal is not unit length");
     }
+  }
+}
+
+/// One input of a cloud reader's target (`extension` picks the reader): a bad file is
+/// std::invalid_argument; a file that loads gives finite points, unit normals and counts
+/// that add up, for load_cloud and load_points alike.
+inline void check_reader(const uint8_t* data, size_t size, const char* extension) {
+  const std::string& path = input_file(data, size, extension);
+  try {
+    CloudFileInfo info;
+    const PointCloud cloud = load_cloud(path, &info);
+    check_cloud(cloud);
+    check(cloud.size() > 0, "load_cloud returned an empty cloud");
+    check(info.points_in_file == info.width * info.height, "points_in_file != width * height");
+    check(cloud.size() + info.non_finite_dropped == info.points_in_file,
+          "kept + dropped points != points in the file");
+    check(info.had_normals == cloud.has_normals(), "had_normals disagrees with the cloud");
+  } catch (const std::invalid_argument&) {
+  }
+  try {
+    CloudFileInfo info;
+    const Points points = load_points(path, &info);
+    check(std::size_t(points.rows()) == info.points_in_file, "load_points: row count");
+    check(points.array().isFinite().rowwise().all().any(), "load_points: no finite point");
+  } catch (const std::invalid_argument&) {
   }
 }
 
