@@ -289,7 +289,7 @@ class ObjectSpec:
 HALF_PI = math.pi / 2
 #: The objects. A turn counts as a symmetry when it moves 90% of the surface by less than
 #: 2 mm (twice the sensor noise) and none of it by more than 5 mm (half the translation
-#: tolerance): checked in tests/python/test_benchmark_cases.py, for the half turns about
+#: tolerance): checked in benchmarks/tests/test_benchmark_cases.py, for the half turns about
 #: each principal axis of the asymmetric objects too.
 OBJECTS: dict[str, ObjectSpec] = {
     "mug": ObjectSpec("objects/mug.obj", 0.12),
@@ -335,7 +335,7 @@ OBJECTS: dict[str, ObjectSpec] = {
 #: of ``pybullet_data`` that no other family uses. No default of the library was chosen
 #: by looking at them: they are measured after the defaults are fixed (docs/experiments.md,
 #: "Held-out objects"). Symmetries by the rule of OBJECTS, checked in
-#: tests/python/test_benchmark_cases.py.
+#: benchmarks/tests/test_benchmark_cases.py.
 HELDOUT_OBJECTS: dict[str, ObjectSpec] = {
     "panda_link3": ObjectSpec("franka_panda/meshes/collision/link3.obj", 0.19),
     "panda_hand": ObjectSpec("franka_panda/meshes/collision/hand.obj", 0.20),

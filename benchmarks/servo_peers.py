@@ -14,7 +14,7 @@ every controller here (the report checks the joints match).
 Controllers (``CONTROLLERS``):
 
 * ``spectral``: ``SpectralServo(ServoParams())``, what ``servo-sim`` runs;
-* ``dense depth``: ``baselines.DenseDepthServo``, Teuliere and Marchand's depth-map servo
+* ``dense depth``: ``peer_servos.DenseDepthServo``, Teuliere and Marchand's depth-map servo
   (Gauss-Newton, interaction matrix at the current depth map) on the raw depth images;
 * ``ICP-PBVS``: Open3D point-to-plane ICP from the identity every step, then the PBVS law;
 * ``ICP-PBVS warm``: the same ICP started from the previous estimate carried along the
@@ -59,13 +59,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import peer_servos
 import report as report_lib
 from report import BENCHMARKS_DOC, replace_block
 
-from spectral_vs import baselines, sim
 from spectral_vs import servo as servo_lib
+from spectral_vs import sim
 
-# Open3D is imported later (baselines.open3d_module); its thread count is fixed then.
+# Open3D is imported later (peer_servos.open3d_module); its thread count is fixed then.
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one thread, like ours
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -87,8 +88,8 @@ SPECTRAL = "spectral"
 
 
 def _registration(**fields: Any) -> Callable[..., Any]:
-    return lambda cloud, depth, intrinsics: baselines.RegistrationServo(
-        cloud, baselines.RegistrationServoParams(**fields)
+    return lambda cloud, depth, intrinsics: peer_servos.RegistrationServo(
+        cloud, peer_servos.RegistrationServoParams(**fields)
     )
 
 
@@ -99,7 +100,7 @@ CONTROLLERS: dict[str, tuple[Callable[..., Any], bool]] = {
         False,
     ),
     "dense depth": (
-        lambda cloud, depth, intrinsics: baselines.DenseDepthServo(depth, intrinsics),
+        lambda cloud, depth, intrinsics: peer_servos.DenseDepthServo(depth, intrinsics),
         True,
     ),
     "ICP-PBVS": (_registration(method="icp"), False),
@@ -169,7 +170,7 @@ def run_one(
     """Servo ``robot`` from ``start`` with controller ``label``; the run's record."""
     factory, uses_depth = CONTROLLERS[label]
     controller = CpuTimed(factory(references[0], references[1], robot.params.camera.intrinsics))
-    driven = baselines.DepthImageRobot(robot) if uses_depth else robot
+    driven = peer_servos.DepthImageRobot(robot) if uses_depth else robot
     robot.reset_joint_positions(start["q"])
     log = servo_lib.run_servo(
         driven,
@@ -222,10 +223,10 @@ def setup(label: str, robot: str) -> dict[str, Any]:
             if isinstance(v, (int, float, str, bool))
         }
     elif label == "dense depth":
-        out["depth_params"] = dict(baselines.DepthServoParams().__dict__)
+        out["depth_params"] = dict(peer_servos.DepthServoParams().__dict__)
     else:
         out["registration_params"] = dict(
-            baselines.RegistrationServoParams(
+            peer_servos.RegistrationServoParams(
                 method="fpfh" if label == "FPFH-PBVS" else "icp",
                 warm_start=label == "ICP-PBVS warm",
             ).__dict__
@@ -246,7 +247,7 @@ def run(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
             if item not in allowed:
                 parser.error(f"{option}: unknown {item!r}; choose from {list(allowed)}")
     if any(c != SPECTRAL for c in controllers):
-        o3d = baselines.open3d_module()
+        o3d = peer_servos.open3d_module()
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     count = 1 if args.quick else args.starts
     command = "python benchmarks/servo_peers.py " + " ".join(sys.argv[1:])

@@ -71,8 +71,8 @@ ServoState = Literal["running", "converged", "stopped"]
 #: Why a servo run ended (``ServoStatus.reason``, ``ServoLog.reason``).
 REASONS = (
     "converged",  # the estimated error is within the tolerances
-    "empty_cloud",  # the camera sees nothing (the baselines; SpectralServo holds, HOLDS)
-    "too_few_points",  # fewer than min_points (the baselines; SpectralServo holds, HOLDS)
+    "empty_cloud",  # the camera sees nothing (peer servos; SpectralServo holds, HOLDS)
+    "too_few_points",  # fewer than min_points (peer servos; SpectralServo holds, HOLDS)
     "sensor_outage",  # no usable frame (HOLDS) for longer than ServoParams.max_outage
     "jump",  # the estimate moved more than ServoParams.jump_limit_* since the last step
     "joint_limit",  # the joint velocity command had to clamp a joint at its position limit

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -180,7 +177,6 @@ def test_refinements_stop_at_their_iterations():
 
 def _benchmark_cases():
     pytest.importorskip("pybullet")  # the meshes come with pybullet_data
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     import cases
 
     return cases

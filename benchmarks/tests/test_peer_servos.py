@@ -1,4 +1,4 @@
-"""The peer controllers of spectral_vs.baselines: the depth-map interaction matrix against
+"""The peer controllers of benchmarks/peer_servos.py: the depth-map interaction matrix against
 finite differences of an analytically rendered surface, the sign of the dense depth servo's
 step, its convergence in the PyBullet scene, and ICP / FPFH position-based servoing (Open3D,
 skipped when it is not installed)."""
@@ -9,11 +9,10 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+import peer_servos
 import pytest
 from conftest import iiwa_small_start
-
-from spectral_vs import baselines
-from spectral_vs.baselines import (
+from peer_servos import (
     DenseDepthServo,
     DepthServoParams,
     RegistrationServoParams,
@@ -22,6 +21,7 @@ from spectral_vs.baselines import (
     depth_interaction_matrix,
     normalized_coordinates,
 )
+
 from spectral_vs.servo import pose_error, rotation_matrix, run_servo
 
 # --- A smooth surface rendered exactly --------------------------------------------------
@@ -228,7 +228,7 @@ def test_pybullet_depth_servo_reaches_the_reference_pose():
         assert start_t > 0.02 and math.degrees(start_r) > 3
         servo = DenseDepthServo(reference, robot.params.camera.intrinsics)
         log = run_servo(
-            baselines.DepthImageRobot(robot), robot.kinematics, servo, dt=0.1, max_steps=100
+            peer_servos.DepthImageRobot(robot), robot.kinematics, servo, dt=0.1, max_steps=100
         )
         t, r = pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
     assert log.converged, log.status
@@ -242,9 +242,9 @@ def test_missing_open3d_names_the_extra(monkeypatch):
     def no_open3d(name):
         raise ImportError(f"No module named {name!r}")
 
-    monkeypatch.setattr(baselines.importlib, "import_module", no_open3d)
+    monkeypatch.setattr(peer_servos.importlib, "import_module", no_open3d)
     with pytest.raises(ImportError, match=r"spectral_vs\[bench\]"):
-        baselines.RegistrationServo(np.zeros((1000, 3)))
+        peer_servos.RegistrationServo(np.zeros((1000, 3)))
 
 
 def test_registration_params_are_checked():
@@ -268,7 +268,7 @@ def test_registration_servo_estimates_the_pose_and_commands_the_law(camera, meth
     reference = back_project(render(camera, intr), intr)
     current = back_project(render(T_world_current, intr), intr)
     params = RegistrationServoParams(method=method, voxel_size=0.008, min_points=100)
-    servo = baselines.RegistrationServo(reference, params)
+    servo = peer_servos.RegistrationServo(reference, params)
     twist, status, record = servo.step_record(current)
     T_true = np.linalg.inv(T_world_current) @ camera
     t_err, r_err = pose_error(np.linalg.inv(T_true) @ record.T_current_desired)
@@ -289,7 +289,7 @@ def test_pybullet_icp_servo_reaches_the_reference_pose(warm_start):
     pytest.importorskip("open3d")
     with iiwa_small_start(lambda robot: robot.capture()) as start:
         robot, reference, T_world_reference = start
-        servo = baselines.RegistrationServo(
+        servo = peer_servos.RegistrationServo(
             reference, RegistrationServoParams(warm_start=warm_start)
         )
         log = run_servo(robot, robot.kinematics, servo, dt=0.1, max_steps=100)

@@ -1,5 +1,6 @@
-"""Shared fixtures: the real scans beside the project, seeded random data and the
-simulated iiwa moved off its reference pose."""
+"""Fixtures of both test trees (tests/python, the library's; benchmarks/tests, the
+benchmarks'): the real scans beside the project, seeded random data and the simulated iiwa
+moved off its reference pose."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parent
 
 
 @pytest.fixture(scope="session")

@@ -215,7 +215,7 @@ def depth_interaction_matrix(
 
     (Teuliere and Marchand 2014, the depth-map feature; ``Z_x, Z_y`` are the gradients of
     the depth map in normalized coordinates, :func:`depth_gradients`).
-    ``tests/python/test_baselines.py`` checks it against finite differences of a rendered
+    ``benchmarks/tests/test_peer_servos.py`` checks it against finite differences of a rendered
     surface.
 
     Parameters

@@ -8,7 +8,6 @@ brute force (point to triangle, nearest neighbour) on small subsets."""
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,6 @@ import pytest
 
 pytest.importorskip("pybullet")  # the meshes come with pybullet_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import cases
 
 MM = 1e-3
@@ -303,3 +301,49 @@ def test_case_round_trips_through_npz(tmp_path):
     assert loaded.case_id == case.case_id and loaded.info == case.info
     np.testing.assert_array_equal(loaded.symmetries, case.symmetries)
     np.testing.assert_array_equal(loaded.scene_points, case.scene_points)
+
+
+# --- The held-out validation set ----------------------------------------------------------
+
+
+def test_the_held_out_objects_are_new_meshes_and_enough_of_them():
+    held = cases.HELDOUT_OBJECTS
+    assert len(held) >= 6
+    used = {spec.obj for spec in cases.OBJECTS.values()}
+    assert not used & {spec.obj for spec in held.values()}
+    assert not set(held) & set(cases.OBJECTS)
+    for family in cases.HELDOUT_FAMILIES:
+        assert set(cases.FAMILY_OBJECTS[family]) == set(held)
+        assert family not in cases.TUNING_FAMILIES
+
+
+@pytest.mark.parametrize("name", list(cases.HELDOUT_OBJECTS))
+def test_held_out_objects_have_their_stated_symmetries_only(name):
+    mesh = cases.load_mesh(name)
+    extent = mesh.vertices.max(0) - mesh.vertices.min(0)
+    assert 0.08 - 1e-9 <= extent.max() <= 0.25 + 1e-9
+    rotations = cases.HELDOUT_OBJECTS[name].symmetry.rotations
+    for R in rotations[1:]:
+        assert is_symmetry(mesh, R)
+    if len(rotations) == 1:
+        _, axes = np.linalg.eigh(np.cov(mesh.vertices.T))
+        for axis in [*np.eye(3), *axes.T]:
+            assert not is_symmetry(mesh, cases.axis_angle(axis, math.pi))
+
+
+@pytest.mark.parametrize("family", ["heldout_full", "heldout_partial", "heldout_clutter"])
+def test_held_out_cases_are_built_in_each_condition(family):
+    spec = cases.CaseSpec(family, "panda_link3", 90.0, 0)
+    case = cases.make_case(spec)
+    assert case.condition == cases.CONDITIONS[family]
+    # T_true maps the model onto the scene: the nearest scene point of a model point moved
+    # by it is within the noise and sampling (brute force on a subset).
+    moved = cases.apply(case.T_true, case.model_points[::25])
+    nearest = np.min(np.linalg.norm(moved[:, None] - case.scene_points[None, ::3], axis=2), axis=1)
+    assert np.percentile(nearest, 50 if family == "heldout_full" else 10) < 5 * MM
+    if family == "heldout_clutter":
+        others = case.info["objects"][1:]
+        assert 2 <= len(others) <= 3 and set(others) <= set(cases.HELDOUT_OBJECTS)
+    # The same spec gives the same case.
+    again = cases.make_case(spec)
+    np.testing.assert_array_equal(case.scene_points, again.scene_points)

@@ -18,7 +18,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before an OpenMP runtime 
 pytest.importorskip("open3d")
 pytest.importorskip("pybullet")  # the meshes come with pybullet_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import cases
 import peers
 
