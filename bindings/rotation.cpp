@@ -79,6 +79,17 @@ Eigen::Matrix3d to_rotation(const py::handle& object, const char* argument) {
   return R;
 }
 
+Eigen::Vector3d to_rotation_vector(const py::handle& object, const char* argument) {
+  const auto array = float_array(object, argument);
+  if (array.ndim() != 1 || array.shape(0) != 3) {
+    throw py::value_error(std::string(argument) + " must have shape (3,), got " +
+                          shape_of(array));
+  }
+  const Eigen::Vector3d v(array.at(0), array.at(1), array.at(2));
+  if (!v.allFinite()) throw py::value_error(std::string(argument) + " is not finite");
+  return v;
+}
+
 SphereGrid to_grid(const py::handle& object, int bandwidth) {
   require_bandwidth(bandwidth);
   const auto array = float_array(object, "grid");
@@ -120,6 +131,52 @@ double median_seconds(int repeats, F&& f) {
 }  // namespace
 
 void define_rotation(py::module_& m) {
+  m.def(
+      "so3_exp",
+      [](const py::handle& rotation_vector) {
+        return exp_so3(to_rotation_vector(rotation_vector, "rotation_vector"));
+      },
+      py::arg("rotation_vector"), R"doc(
+The rotation exp(hat(rotation_vector)): |rotation_vector| radians about its direction
+(Rodrigues' formula; the update of the paper's eq. 17).
+
+Parameters
+----------
+rotation_vector : array_like, shape (3,)
+    Axis times angle, radians; finite.
+
+Returns
+-------
+numpy.ndarray, shape (3, 3)
+)doc");
+
+  m.def(
+      "so3_log",
+      [](const py::handle& R) { return log_so3(to_rotation(R, "R")); },
+      py::arg("R"), R"doc(
+The rotation vector of R: axis times angle, the angle in [0, pi] radians, with
+so3_exp(so3_log(R)) = R. Computed through the quaternion, so it is well conditioned at
+every angle; at exactly pi the sign of the axis is arbitrary.
+
+Parameters
+----------
+R : array_like, shape (3, 3)
+    A rotation matrix: finite, max |R^T R - I| and |det R - 1| at most 1e-6.
+
+Returns
+-------
+numpy.ndarray, shape (3,)
+)doc");
+
+  m.def(
+      "rotation_angle",
+      [](const py::handle& R) { return log_so3(to_rotation(R, "R")).norm(); },
+      py::arg("R"), R"doc(
+The angle of the rotation R, radians in [0, pi]: the geodesic distance of R from the
+identity on SO(3), |so3_log(R)|. The angle between two rotations A and B is
+rotation_angle(A.T @ B).
+)doc");
+
   m.def(
       "sh_index",
       [](int l, int m) {

@@ -16,6 +16,8 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from spectral_vs._core import rotation_angle, so3_exp, so3_log
+
 
 class PoseError(NamedTuple):
     """The distance between two poses: translation in metres, rotation angle in radians.
@@ -39,45 +41,26 @@ class PoseError(NamedTuple):
 
 
 def rotation_vector(R: npt.ArrayLike) -> np.ndarray:
-    """``theta u`` of a rotation matrix: axis times angle, rad, angle in [0, pi].
+    """``theta u`` of a rotation matrix: axis times angle, rad, angle in [0, pi]
+    (:func:`spectral_vs.so3_log`, the C++ library's logarithm).
 
     Parameters
     ----------
     R : ndarray, shape (3, 3)
-        A rotation matrix.
+        A rotation matrix (orthonormal within 1e-6, determinant +1).
 
     Returns
     -------
     ndarray, shape (3,)
         The rotation vector; its norm is the angle.
     """
-    R = np.asarray(R, dtype=float)
-    cos_angle = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    angle = math.acos(cos_angle)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if angle < 1e-6:
-        return w / 2.0  # sin(angle) ~ angle
-    if angle < math.pi - 1e-3:
-        return w * (angle / (2.0 * math.sin(angle)))
-    # Near pi the skew part vanishes: the axis is the dominant column of R + I.
-    B = (R + np.eye(3)) / 2.0
-    k = int(np.argmax(np.diag(B)))
-    axis = B[:, k] / math.sqrt(max(B[k, k], 1e-12))
-    if w @ axis < 0:
-        axis = -axis
-    return axis / np.linalg.norm(axis) * angle
+    return so3_log(np.asarray(R, dtype=float))
 
 
 def rotation_matrix(rotvec: npt.ArrayLike) -> np.ndarray:
-    """The rotation ``exp(hat(rotvec))`` (Rodrigues' formula); ``rotvec`` in radians."""
-    rotvec = np.asarray(rotvec, dtype=float)
-    angle = float(np.linalg.norm(rotvec))
-    K = np.array(
-        [[0.0, -rotvec[2], rotvec[1]], [rotvec[2], 0.0, -rotvec[0]], [-rotvec[1], rotvec[0], 0.0]]
-    )
-    if angle < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + math.sin(angle) / angle * K + (1.0 - math.cos(angle)) / angle**2 * (K @ K)
+    """The rotation ``exp(hat(rotvec))`` (Rodrigues' formula, :func:`spectral_vs.so3_exp`);
+    ``rotvec`` in radians."""
+    return so3_exp(np.asarray(rotvec, dtype=float))
 
 
 def _pose(T: npt.ArrayLike, argument: str) -> np.ndarray:
@@ -114,7 +97,8 @@ def pose_error(
     Raises
     ------
     ValueError
-        If a transform is not 4x4, or ``center`` is not 3 numbers.
+        If a transform is not 4x4 or its rotation part is not a rotation (finite,
+        orthonormal within 1e-6), or ``center`` is not 3 numbers.
     """
     T = _pose(T, "T")
     point = np.zeros(3) if center is None else np.asarray(center, dtype=float)
@@ -127,4 +111,8 @@ def pose_error(
         T_true = _pose(T_true, "T_true")
         R = T_true[:3, :3].T @ T[:3, :3]
         offset = T[:3, :3] @ point + T[:3, 3] - T_true[:3, :3] @ point - T_true[:3, 3]
-    return PoseError(float(np.linalg.norm(offset)), float(np.linalg.norm(rotation_vector(R))))
+    try:
+        angle = rotation_angle(R)
+    except ValueError as error:
+        raise ValueError(f"T and T_true must be rigid transforms: {error}") from None
+    return PoseError(float(np.linalg.norm(offset)), angle)

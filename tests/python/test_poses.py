@@ -49,8 +49,8 @@ def test_an_estimate_against_the_truth_at_a_center():
 
 
 def test_rotations_near_half_a_turn_and_near_zero():
-    # The angle comes from the trace: near a half turn its cosine is within 5e-15 of -1,
-    # which leaves about 1e-9 rad (6e-8 degree) of rounding.
+    # From the trace, a half turn's angle would keep about 1e-9 rad of rounding (its cosine
+    # is within 5e-15 of -1); the quaternion of so3_log does better, within the bound.
     assert svs.pose_error(pose([0.0, math.pi - 1e-7, 0.0], [0, 0, 0])).rotation_rad == (
         pytest.approx(math.pi - 1e-7, abs=1e-8)
     )
@@ -66,6 +66,85 @@ def test_bad_poses_are_refused():
         svs.pose_error(np.eye(4), np.eye(3))
     with pytest.raises(ValueError, match="center must be 3 numbers"):
         svs.pose_error(np.eye(4), np.eye(4), center=[1.0, 2.0])
+
+
+# --- The SO(3) helpers bound from C++ (so3_exp, so3_log, rotation_angle) ---------------
+
+
+def rotation_z(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def random_rotations(count: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Uniform rotations from normalised Gaussian quaternions, written out by hand."""
+    out = []
+    for w, x, y, z in rng.normal(size=(count, 4)):
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / n, x / n, y / n, z / n
+        out.append(
+            np.array(
+                [
+                    [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                    [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                    [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+                ]
+            )
+        )
+    return out
+
+
+@pytest.mark.parametrize("degrees", [0.0, 1e-7, 0.01, 30.0, 90.0, 179.0, 180.0 - 1e-6])
+def test_exp_and_log_about_z_match_the_closed_form(degrees):
+    angle = math.radians(degrees)
+    np.testing.assert_allclose(svs.so3_exp([0.0, 0.0, angle]), rotation_z(angle), atol=1e-15)
+    np.testing.assert_allclose(svs.so3_log(rotation_z(angle)), [0.0, 0.0, angle], atol=1e-12)
+    assert svs.rotation_angle(rotation_z(-angle)) == pytest.approx(angle, abs=1e-12)
+
+
+def test_exp_is_the_inverse_of_log_on_random_rotations():
+    rng = np.random.default_rng(7)
+    for R in random_rotations(200, rng):
+        w = svs.so3_log(R)
+        assert np.linalg.norm(w) <= math.pi + 1e-12
+        np.testing.assert_allclose(svs.so3_exp(w), R, atol=1e-12)
+        # The angle is the one of the trace: 1 + 2 cos(angle) = trace(R).
+        assert 1 + 2 * math.cos(svs.rotation_angle(R)) == pytest.approx(np.trace(R), abs=1e-12)
+
+
+def test_the_half_turn_and_its_neighbours_keep_their_axis():
+    axis = np.array([2.0, -1.0, 2.0]) / 3.0
+    for angle in (math.pi - 1e-9, math.pi - 1e-4, math.pi):
+        w = svs.so3_log(svs.so3_exp(angle * axis))
+        assert np.linalg.norm(w) == pytest.approx(angle, abs=1e-9)
+        # At exactly pi the sign of the axis is free: either one is the same rotation.
+        assert abs(abs(w @ axis) - angle) < 1e-9
+
+
+def test_exp_is_a_homomorphism_about_one_axis_and_its_derivative_is_hat():
+    axis = np.array([1.0, 2.0, -2.0]) / 3.0
+    np.testing.assert_allclose(
+        svs.so3_exp(0.3 * axis) @ svs.so3_exp(0.5 * axis), svs.so3_exp(0.8 * axis), atol=1e-15
+    )
+    w, h = np.array([0.2, -0.4, 0.1]), 1e-6
+    derivative = (svs.so3_exp(h * w) - svs.so3_exp(-h * w)) / (2 * h)
+    hat = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    np.testing.assert_allclose(derivative, hat, atol=1e-9)
+
+
+def test_the_so3_helpers_refuse_bad_input_by_name():
+    with pytest.raises(ValueError, match=r"rotation_vector must have shape \(3,\)"):
+        svs.so3_exp(np.zeros(4))
+    with pytest.raises(ValueError, match="rotation_vector is not finite"):
+        svs.so3_exp([0.0, np.nan, 0.0])
+    with pytest.raises(ValueError, match="R is not a rotation matrix"):
+        svs.so3_log(2.0 * np.eye(3))
+    with pytest.raises(ValueError, match=r"R must have shape \(3, 3\)"):
+        svs.rotation_angle(np.eye(4))
+    with pytest.raises(ValueError, match="R is not finite"):
+        svs.rotation_angle(np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match="T and T_true must be rigid transforms"):
+        svs.pose_error(np.diag([2.0, 1.0, 1.0, 1.0]))
 
 
 def test_the_servo_and_the_plots_use_the_one_function():

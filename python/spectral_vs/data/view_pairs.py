@@ -1,6 +1,5 @@
-"""Test data shared by the command line, the tests and the benchmarks: pairs of views of
-one scene for scene-to-scene registration (direct visual servoing registers a reference
-view onto the current view).
+"""Pairs of views of one scene for scene-to-scene registration (direct visual servoing
+registers a reference view onto the current view).
 
 Two sources of :class:`ViewPair`:
 
@@ -37,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from spectral_vs._core import PointCloud, estimate_normals, load_organized
+from spectral_vs._core import PointCloud, estimate_normals, load_organized, rotation_angle
 
 if TYPE_CHECKING:
     from spectral_vs.sim import SimParams
@@ -145,8 +144,7 @@ class ViewPair:
 
 def rotation_angle_deg(R: npt.ArrayLike) -> float:
     """Angle of a rotation matrix, degrees (in [0, 180])."""
-    R = np.asarray(R, dtype=float)
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    return math.degrees(rotation_angle(np.asarray(R, dtype=float)))
 
 
 def random_transform(

@@ -1,0 +1,7 @@
+"""``python -m spectral_vs.cli``."""
+
+import sys
+
+from spectral_vs.cli import main
+
+sys.exit(main())

@@ -1,0 +1,173 @@
+"""What the subcommands share: input checks that name the argument, progress lines, the
+error limits of the runs against a ground truth, and pose formatting."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+import spectral_vs as svs
+from spectral_vs.poses import pose_error
+
+DEFAULT_DATA = Path(os.environ.get("SPECTRAL_VS_DATA", "../shared/data"))
+#: Ground-truth errors above these fail a run (exit code 1): degrees, millimetres.
+MAX_ROTATION_ERROR = 5.0
+MAX_TRANSLATION_ERROR = 10.0
+CLOUD_SUFFIXES = (".pcd", ".ply")
+#: servo-sim fails (exit code 1) above these final camera pose errors: mm, degrees.
+MAX_SERVO_ERROR_MM = 5.0
+MAX_SERVO_ERROR_DEG = 1.0
+
+
+class InputError(Exception):
+    """Bad input on the command line; the message names the argument (exit code 2)."""
+
+
+class Progress:
+    """Stage lines with their elapsed time on stderr, e.g. ``loading scene.pcd ... 12 ms``."""
+
+    def __init__(self, enabled: bool, stream: TextIO | None = None) -> None:
+        self.enabled = enabled
+        self.stream = stream if stream is not None else sys.stderr
+
+    @contextlib.contextmanager
+    def stage(self, text: str) -> Iterator[list[str]]:
+        """Print ``text ...``, run the block, then the notes it appended and the time taken."""
+        notes: list[str] = []
+        if self.enabled:
+            print(f"{text} ...", end=" ", file=self.stream, flush=True)
+        start = time.perf_counter()
+        try:
+            yield notes
+        except BaseException:
+            if self.enabled:
+                print("failed", file=self.stream, flush=True)
+            raise
+        if self.enabled:
+            notes.append(_duration(time.perf_counter() - start))
+            print(", ".join(notes), file=self.stream, flush=True)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def _duration(seconds: float) -> str:
+    return f"{1000 * seconds:.0f} ms" if seconds < 1 else f"{seconds:.1f} s"
+
+
+def _translation(t: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = t
+    return T
+
+
+def rotation_about(axis: Any, angle_deg: float) -> np.ndarray:
+    """Rotation matrix of ``angle_deg`` degrees about ``axis``."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    return svs.so3_exp(k * np.radians(angle_deg))
+
+
+def axis_angle(R: np.ndarray) -> tuple[np.ndarray, float]:
+    """Unit axis and angle (degrees, in [0, 180]) of a rotation matrix (the z axis for the
+    identity)."""
+    rotation_vector = svs.so3_log(np.asarray(R, dtype=float))
+    angle = float(np.linalg.norm(rotation_vector))
+    if angle < 1e-12:
+        return np.array([0.0, 0.0, 1.0]), 0.0
+    return rotation_vector / angle, float(np.degrees(angle))
+
+
+def describe_transform(T: np.ndarray) -> str:
+    """``rotation 120.0 deg about [...], translation [...] mm``."""
+    axis, angle = axis_angle(np.asarray(T)[:3, :3])
+    axis_text = np.array2string(axis, precision=3, suppress_small=True)
+    t_text = np.array2string(1000 * np.asarray(T)[:3, 3], precision=1, suppress_small=True)
+    return f"rotation {angle:6.2f} deg about {axis_text}, translation {t_text} mm"
+
+
+def _strip_argument(message: str) -> str:
+    """The core's I/O messages start with ``path: ``; the CLI names its own argument instead."""
+    return message[len("path: ") :] if message.startswith("path: ") else message
+
+
+def read_cloud(path: Path, argument: str) -> svs.PointCloud:
+    """Load a PCD/PLY file; a missing or unreadable file is an :class:`InputError`."""
+    if path.is_dir():
+        raise InputError(f"{argument}: {path} is a folder, not a .pcd or .ply file")
+    try:
+        return svs.load_cloud(path)
+    except (ValueError, OSError) as error:
+        raise InputError(f"{argument}: {_strip_argument(str(error))}") from error
+
+
+def read_transform(path: Path, argument: str) -> np.ndarray:
+    """A rigid 4x4 transform from whitespace-separated text or a ``.npy`` file."""
+    if not path.is_file():
+        raise InputError(f"{argument}: no such file: {path}")
+    try:
+        T = np.load(path) if path.suffix == ".npy" else np.loadtxt(path, ndmin=2)
+    except (ValueError, OSError) as error:
+        raise InputError(f"{argument}: {path} is not a matrix of numbers ({error})") from error
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise InputError(f"{argument}: {path} must hold a finite 4x4 matrix, got shape {T.shape}")
+    R = T[:3, :3]
+    rigid = np.allclose(R.T @ R, np.eye(3), atol=1e-4) and np.linalg.det(R) > 0
+    if not rigid or not np.allclose(T[3], [0, 0, 0, 1]):
+        raise InputError(f"{argument}: {path} is not a rigid transform (rotation and translation)")
+    return T
+
+
+def _check_output(path: Path | None, argument: str, suffixes: tuple[str, ...]) -> None:
+    """Refuse an output file with a wrong extension before a long alignment starts."""
+    if path is not None and path.suffix.lower() not in suffixes:
+        raise InputError(f"{argument}: {path} must end in {' or '.join(suffixes)}")
+
+
+def _plotting(argument: str) -> Any:
+    """The plotting module, or an :class:`InputError` telling how to install matplotlib."""
+    try:
+        from spectral_vs import plotting
+
+        plotting._new_figure(1, 1)
+    except ImportError as error:
+        raise InputError(f"{argument}: {error}") from error
+    return plotting
+
+
+def _errors(T: np.ndarray, truth: np.ndarray, center: np.ndarray) -> tuple[float, float]:
+    """(rotation in degrees, translation in mm): the order of the limits and the report."""
+    error = pose_error(T, truth, center=center)
+    return error.rotation_deg, error.translation_mm
+
+
+def _within(errors: tuple[float, float], limits: tuple[float, float]) -> bool:
+    return errors[0] <= limits[0] and errors[1] <= limits[1]
+
+
+def _write(path: Path, draw: Any, *args: Any, **kwargs: Any) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    draw(*args, path, **kwargs)
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
