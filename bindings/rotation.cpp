@@ -82,8 +82,7 @@ Eigen::Matrix3d to_rotation(const py::handle& object, const char* argument) {
 Eigen::Vector3d to_rotation_vector(const py::handle& object, const char* argument) {
   const auto array = float_array(object, argument);
   if (array.ndim() != 1 || array.shape(0) != 3) {
-    throw py::value_error(std::string(argument) + " must have shape (3,), got " +
-                          shape_of(array));
+    throw py::value_error(std::string(argument) + " must have shape (3,), got " + shape_of(array));
   }
   const Eigen::Vector3d v(array.at(0), array.at(1), array.at(2));
   if (!v.allFinite()) throw py::value_error(std::string(argument) + " is not finite");
@@ -151,9 +150,8 @@ numpy.ndarray, shape (3, 3)
 )doc");
 
   m.def(
-      "so3_log",
-      [](const py::handle& R) { return log_so3(to_rotation(R, "R")); },
-      py::arg("R"), R"doc(
+      "so3_log", [](const py::handle& R) { return log_so3(to_rotation(R, "R")); }, py::arg("R"),
+      R"doc(
 The rotation vector of R: axis times angle, the angle in [0, pi] radians, with
 so3_exp(so3_log(R)) = R. Computed through the quaternion, so it is well conditioned at
 every angle; at exactly pi the sign of the axis is arbitrary.
@@ -169,8 +167,7 @@ numpy.ndarray, shape (3,)
 )doc");
 
   m.def(
-      "rotation_angle",
-      [](const py::handle& R) { return log_so3(to_rotation(R, "R")).norm(); },
+      "rotation_angle", [](const py::handle& R) { return log_so3(to_rotation(R, "R")).norm(); },
       py::arg("R"), R"doc(
 The angle of the rotation R, radians in [0, pi]: the geodesic distance of R from the
 identity on SO(3), |so3_log(R)|. The angle between two rotations A and B is

@@ -1,0 +1,197 @@
+#include "alignment/hypotheses.hpp"
+
+#include <spectral_vs/rotation/so3.hpp>
+#include <spectral_vs/rotation/so3_search.hpp>
+
+#include "alignment/align_detail.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+
+namespace spectral_vs::detail {
+
+namespace {
+
+// Largest global-search grid before its voxel is coarsened: 2^19 voxels, about 4 ms per
+// FFT pair here, so that 16 hypotheses fit the time budget on a room-sized scan.
+constexpr double kSearchGridVoxels = 524288.0;
+
+// A part's hypotheses are placed first on a grid this many times coarser than the
+// alignment's voxel (an eighth of the voxels to transform), then on the alignment's.
+constexpr double kCoarsePlacement = 2.0;
+
+// For a model whose EGI has a flat axis (see flat_axis below), the EGI cannot tell its
+// turns about that axis apart, but the scene can: the best-ranked hypotheses are turned
+// to the fittest of the turns every kFlatAxisStep, scored with depths within `tolerance`.
+constexpr std::size_t kTurnedHypotheses = 16;
+
+// Turn between two rotations, degrees.
+double turn_deg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  const double c = std::clamp(0.5 * ((a.transpose() * b).trace() - 1.0), -1.0, 1.0);
+  return std::acos(c) * 180.0 / M_PI;
+}
+
+}  // namespace
+
+double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params) {
+  if (params.search_voxel_size > 0.0) return params.search_voxel_size;
+  const Eigen::Vector3d extent = bounding_box(scene).sizes().array() + 4.0 * reach;
+  const double fitting = std::cbrt(extent.prod() / kSearchGridVoxels);
+  return std::max(2.0 * params.voxel_size, fitting);
+}
+
+// Beyond the paper: the best rotations of the SO(3) search, each refined on the EGI
+// correlation and placed by a phase correlation over the whole scene (coarse voxels),
+// ranked by fitness.
+std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation& correlation,
+                                          const ShCoefficients& scene_coefficients,
+                                          double search_voxel) {
+  const AlignParams& params = problem.params;
+  So3SearchParams search;
+  search.candidates = params.hypotheses;
+  search.threads = params.threads;
+  const auto candidates =
+      so3_search(scene_coefficients, problem.model_coefficients, params.bandwidth, search);
+  const Eigen::Vector3d start = problem.scene.cloud().centroid();
+  SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel,
+                          params.occupancy, phase_params(params), params.limits);
+  RotationRefineParams refine;
+  refine.newton = params.rotation_step == RotationStep::newton;
+  std::vector<Hypothesis> hypotheses;
+  for (std::size_t h = 0; h < candidates.size(); ++h) {
+    if (h > 0 && expired(problem)) break;  // the best-correlated ones are first
+    Hypothesis hypothesis;
+    hypothesis.index = static_cast<int>(h);
+    hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
+    hypothesis.pose.offset = start - problem.model.centroid();
+    hypothesis.pose.offset += coarse.estimate(problem.model.move(hypothesis.pose)).shift;
+    hypothesis.fitness =
+        problem.model.fitness(problem.scene, problem.view, hypothesis.pose, search_voxel);
+    hypotheses.push_back(hypothesis);
+  }
+  rank(hypotheses);
+  return hypotheses;
+}
+
+// Beyond the paper: in clutter the EGI of the whole scene mixes every object's normals,
+// and its best rotations are mostly other objects'. Per connected part of the scene that
+// could be the object, the SO(3) search runs on the part's own EGI, and its rotations are
+// placed by phase correlation in a window around the part at the alignment's voxel.
+std::vector<Hypothesis> part_hypotheses(const Problem& problem,
+                                        const std::vector<std::vector<Eigen::Index>>& parts,
+                                        int per_part, std::optional<TranslationWindow>& window) {
+  const AlignParams& params = problem.params;
+  const PointCloud& scene = problem.scene.cloud();
+  So3SearchParams search;
+  search.candidates = per_part;
+  search.threads = params.threads;
+  RotationRefineParams refine;
+  refine.newton = params.rotation_step == RotationStep::newton;
+  std::vector<Hypothesis> hypotheses;
+  std::optional<TranslationWindow> coarse;
+  for (const auto& part : parts) {
+    if (!hypotheses.empty() && expired(problem)) break;
+    const Points normals = detail::rows_of(scene.normals(), part);
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (const Eigen::Index i : part) centroid += scene.points().row(i).transpose();
+    centroid /= double(part.size());
+    const ShCoefficients coefficients =
+        egi_coefficients(normals, params.bandwidth, params.egi_method);
+    std::optional<So3Correlation> correlation;
+    try {
+      correlation.emplace(coefficients, problem.model_coefficients, params.bandwidth, true);
+    } catch (const std::invalid_argument&) {
+      continue;  // a part whose normals have no structure
+    }
+    place_window(problem, window, centroid);
+    if (coarse) {
+      coarse->place(centroid);
+    } else {
+      coarse.emplace(problem.scene, problem.model.reach(), problem.margin, centroid,
+                     kCoarsePlacement * params.voxel_size, params.occupancy, phase_params(params),
+                     params.limits);
+    }
+    for (const RotationCandidate& candidate :
+         so3_search(coefficients, problem.model_coefficients, params.bandwidth, search)) {
+      Hypothesis hypothesis;
+      hypothesis.index = int(hypotheses.size());
+      hypothesis.pose.R = refine_rotation(*correlation, candidate.R, refine).R;
+      hypothesis.pose.offset = centroid - problem.model.centroid();
+      if (problem.viewpoint) {
+        hypothesis.pose.offset -=
+            problem.model.facing_side(hypothesis.pose.R, centroid - *problem.viewpoint);
+      }
+      // Twice: the coarse shift brings the model near enough for the fine one to be exact.
+      hypothesis.pose.offset += coarse->estimate(problem.model.move(hypothesis.pose)).shift;
+      hypothesis.pose.offset += window->estimate(problem.model.move(hypothesis.pose)).shift;
+      hypothesis.fitness =
+          problem.model.fitness(problem.scene, problem.view, hypothesis.pose, params.voxel_size);
+      hypotheses.push_back(hypothesis);
+    }
+  }
+  rank(hypotheses);
+  return hypotheses;
+}
+
+void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypotheses,
+                          double tolerance) {
+  if (!problem.flat_axis) return;
+  const int turns = static_cast<int>(std::lround(2.0 * M_PI / kFlatAxisStep));
+  const std::size_t count = std::min(kTurnedHypotheses, hypotheses.size());
+  for (std::size_t h = 0; h < count; ++h) {
+    Hypothesis& hypothesis = hypotheses[h];
+    const Pose start = hypothesis.pose;
+    for (int k = 1; k < turns; ++k) {
+      Pose trial = start;
+      trial.R = start.R * exp_so3(double(k) * kFlatAxisStep * *problem.flat_axis);
+      const double fitness = problem.model.fitness(problem.scene, problem.view, trial, tolerance);
+      if (fitness > hypothesis.fitness) {
+        hypothesis.fitness = fitness;
+        hypothesis.pose = trial;
+      }
+    }
+  }
+  rank(hypotheses);
+}
+
+// Beyond the paper: the axis about which the model's EGI barely changes (a mug's: its
+// handle is a few percent of the normals), as the eigenvector of the smallest curvature
+// of the model's EGI autocorrelation at the identity, when that curvature is under
+// kFlatAxisRatio of the largest. Along it the EGI correlation cannot tell poses apart.
+std::optional<Eigen::Vector3d> flat_axis(const ShCoefficients& model_coefficients, int bandwidth) {
+  std::optional<So3Correlation> self;
+  try {
+    self.emplace(model_coefficients, model_coefficients, bandwidth, true);
+  } catch (const std::invalid_argument&) {
+    return std::nullopt;  // a uniform EGI: no axis to single out
+  }
+  const CorrelationValue c = self->evaluate(Eigen::Matrix3d::Identity(), true);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(-c.hessian);
+  const Eigen::Vector3d curvature = eigen.eigenvalues();  // ascending
+  if (!(curvature(2) > 0.0) || curvature(0) > kFlatAxisRatio * curvature(2)) return std::nullopt;
+  return eigen.eigenvectors().col(0);
+}
+
+// The initial guess as a hypothesis, ranked with the search's; with a neighbourhood, the
+// search's hypotheses outside it are dropped.
+void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses,
+                     double tolerance) {
+  const AlignParams& params = problem.params;
+  Hypothesis guess;
+  guess.index = -1;
+  guess.pose = problem.model.pose_of(params.initial_guess);
+  guess.fitness = problem.model.fitness(problem.scene, problem.view, guess.pose, tolerance);
+  const Eigen::Vector3d centre = problem.model.centre(guess.pose);
+  const auto outside = [&](const Hypothesis& h) {
+    return (params.guess_angle_deg > 0.0 &&
+            turn_deg(h.pose.R, guess.pose.R) > params.guess_angle_deg) ||
+           (params.guess_distance > 0.0 &&
+            (problem.model.centre(h.pose) - centre).norm() > params.guess_distance);
+  };
+  hypotheses.erase(std::remove_if(hypotheses.begin(), hypotheses.end(), outside), hypotheses.end());
+  hypotheses.push_back(guess);
+  rank(hypotheses);
+}
+
+}  // namespace spectral_vs::detail

@@ -1,0 +1,44 @@
+#pragma once
+// Internal to align(), its second stage (beyond the paper, which starts Algorithm 1 from
+// the identity): the rotations of the SO(3) search on the EGI correlation, each placed
+// by phase correlation and ranked by fitness; the model's flat axis and the turns about
+// it; the initial guess as one more hypothesis.
+
+#include <spectral_vs/rotation/so3_correlation.hpp>
+
+#include "alignment/stages.hpp"
+
+#include <optional>
+#include <vector>
+
+namespace spectral_vs::detail {
+
+/// The voxel of the global search's grid over the whole scene, metres: the alignment's
+/// doubled, coarser on a large scene (AlignParams::search_voxel_size, or derived).
+double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params);
+
+/// The best rotations of the SO(3) search on the whole scene's EGI, placed on the scene
+/// at `search_voxel`, fittest first.
+std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation& correlation,
+                                          const ShCoefficients& scene_coefficients,
+                                          double search_voxel);
+
+/// `per_part` rotations of the SO(3) search on each part's own EGI, placed in a window
+/// around the part, fittest first.
+std::vector<Hypothesis> part_hypotheses(const Problem& problem,
+                                        const std::vector<std::vector<Eigen::Index>>& parts,
+                                        int per_part, std::optional<TranslationWindow>& window);
+
+/// The best-ranked hypotheses turned to the fittest of their turns about the model's
+/// flat axis (problem.flat_axis), when it has one.
+void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypotheses,
+                          double tolerance);
+
+/// The axis of the model's EGI along which the EGI correlation cannot tell poses apart,
+/// if it has one (model frame).
+std::optional<Eigen::Vector3d> flat_axis(const ShCoefficients& model_coefficients, int bandwidth);
+
+/// The initial guess as a hypothesis; with a neighbourhood, the ones outside it dropped.
+void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses, double tolerance);
+
+}  // namespace spectral_vs::detail

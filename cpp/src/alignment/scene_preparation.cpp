@@ -1,0 +1,142 @@
+#include "alignment/scene_preparation.hpp"
+
+#include "alignment/align_detail.hpp"
+#include "common/checks.hpp"
+
+#include <numeric>
+
+namespace spectral_vs {
+namespace detail {
+
+// A connected part of the scene that could be the object, or the part of it a view
+// shows: at least kPartMinPoints points, no smaller than a quarter of the model's reach
+// and no larger than two of its diameters (two objects touching).
+constexpr std::size_t kPartMinPoints = 30;
+// Points this many voxels apart are in one part: the scene comes downsampled to half a
+// voxel, and objects a few millimetres apart stay apart.
+constexpr double kPartTolerance = 0.75;
+constexpr std::size_t kMaxParts = 8;
+
+std::vector<std::vector<Eigen::Index>> object_parts(
+    const PointCloud& searched, const std::optional<detail::SupportPlane>& plane, double reach,
+    double voxel_size) {
+  // Without the points near the plane (their normals tilted at the objects' feet) that
+  // would join every object into one part, or below it.
+  std::vector<Eigen::Index> above;
+  for (Eigen::Index i = 0; i < searched.points().rows(); ++i) {
+    if (!plane || searched.points().row(i).dot(plane->normal) - plane->offset > 1.5 * voxel_size)
+      above.push_back(i);
+  }
+  const Points points = detail::rows_of(searched.points(), above);
+  const auto plausible = [&](const std::vector<Eigen::Index>& part) {
+    Eigen::AlignedBox3d box;
+    for (const Eigen::Index i : part) box.extend(searched.points().row(i).transpose());
+    const double size = box.sizes().norm();
+    return size >= 0.25 * reach && size <= 4.0 * reach;
+  };
+  std::vector<std::vector<Eigen::Index>> kept;
+  for (auto& part : detail::connected_parts(points, kPartTolerance * voxel_size)) {
+    if (part.size() < kPartMinPoints || kept.size() == kMaxParts) break;
+    for (Eigen::Index& i : part) i = above[std::size_t(i)];
+    if (plausible(part)) kept.push_back(std::move(part));
+  }
+  // A view of one object that its depth edges cut in parts: the parts, and the whole.
+  if (kept.size() != 1 && plausible(above)) kept.insert(kept.begin(), std::move(above));
+  return kept;
+}
+
+// A single view without a support plane (the object alone, or the part of it a view
+// shows): the whole view is the one part, placed from the model's side facing the sensor.
+std::vector<Eigen::Index> whole_view(const PointCloud& searched) {
+  std::vector<Eigen::Index> all(searched.size());
+  std::iota(all.begin(), all.end(), Eigen::Index(0));
+  return all;
+}
+
+// With guess_distance: the parts of the scene that the model could reach from the guess.
+void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
+                           std::vector<std::vector<Eigen::Index>>& parts) {
+  const AlignParams& params = problem.params;
+  if (!(params.guess_distance > 0.0)) return;
+  const Eigen::Vector3d centre = problem.model.centre(problem.model.pose_of(params.initial_guess));
+  const double reach = params.guess_distance + problem.model.reach();
+  const auto far = [&](const std::vector<Eigen::Index>& part) {
+    for (const Eigen::Index i : part)
+      if ((searched.points().row(i).transpose() - centre).norm() <= reach) return false;
+    return true;
+  };
+  parts.erase(std::remove_if(parts.begin(), parts.end(), far), parts.end());
+}
+
+namespace {
+
+// Pixels of the single-view detection, in tolerances at the scene's median distance: finer
+// than the view check's half tolerance, so that a downsampled scan's far surfaces (several
+// points per pixel of half a voxel, seen at a slant) are not taken for hidden ones, and
+// coarse enough that the empty pixels between a full model's front points, filled from
+// their neighbours, still hide its back.
+constexpr double kDetectionPixel = 0.25;
+
+// The share of the scene that a sensor at `origin` sees, on the range image `image` made
+// from there.
+double visible_share(const PointCloud& scene, const RangeImage& image, double tolerance) {
+  const detail::ViewCheck seen =
+      image.check(scene.points(), scene.normals(), tolerance, RangeImage::Distance::along_normal);
+  return double(seen.surface_points) / double(scene.size());
+}
+
+// Where the sensor of the scene is, and whether the scene is one view from there.
+struct SceneSensor {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  SceneView view = SceneView::automatic;
+};
+
+SceneSensor scene_sensor(const AlignParams& params) {
+  if (params.scene_viewpoint) return {*params.scene_viewpoint, SceneView::single_view};
+  return {params.sensor_origin, params.scene_view};
+}
+
+}  // namespace
+
+std::optional<Eigen::Vector3d> declared_viewpoint(const AlignParams& params) {
+  const SceneSensor sensor = scene_sensor(params);
+  if (sensor.view != SceneView::single_view) return std::nullopt;
+  return sensor.origin;
+}
+
+Eigen::Vector3d scene_sensor_origin(const AlignParams& params) {
+  return scene_sensor(params).origin;
+}
+
+// The range image of a single view (half-voxel pixels: a model point a voxel in front of
+// or behind the scan is resolved), or none for a scene seen from all sides or one that
+// the detection does not find to be a single view.
+std::optional<RangeImage> single_view_image(const PointCloud& scene, const AlignParams& params) {
+  const SceneSensor sensor = scene_sensor(params);
+  if (sensor.view == SceneView::all_sides) return std::nullopt;
+  if (sensor.view == SceneView::automatic &&
+      !detect_single_view(scene, sensor.origin, params.voxel_size).single_view)
+    return std::nullopt;
+  return RangeImage(scene, sensor.origin, 0.5 * params.voxel_size);
+}
+
+}  // namespace detail
+
+SingleViewEvidence detect_single_view(const PointCloud& scene, const Eigen::Vector3d& sensor_origin,
+                                      double tolerance) {
+  require_non_empty(scene, "scene");
+  require_normals(scene, "scene");
+  if (!sensor_origin.allFinite()) detail::fail("sensor_origin must be finite");
+  detail::require_positive_finite(tolerance, "tolerance");
+  SingleViewEvidence evidence;
+  try {
+    const detail::RangeImage image(scene, sensor_origin, detail::kDetectionPixel * tolerance);
+    evidence.visible = detail::visible_share(scene, image, tolerance);
+  } catch (const std::invalid_argument&) {
+    evidence.visible = 0.0;  // nothing in front of the origin, or the origin at the centroid
+  }
+  evidence.single_view = evidence.visible >= single_view_threshold;
+  return evidence;
+}
+
+}  // namespace spectral_vs

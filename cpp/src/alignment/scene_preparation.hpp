@@ -1,0 +1,39 @@
+#pragma once
+// Internal to align(), its first stage: what of the scene is searched. The support
+// plane under the objects is taken out (scene_map.hpp), the rest cut into connected
+// parts that could be the object, and a scene seen from one sensor is found out.
+
+#include <spectral_vs/alignment/aligner.hpp>
+
+#include "alignment/range_image.hpp"
+#include "alignment/scene_map.hpp"
+#include "alignment/stages.hpp"
+
+#include <optional>
+#include <vector>
+
+namespace spectral_vs::detail {
+
+/// The connected parts of `searched` (above the support plane, when there is one) that
+/// could be the object: sizes between a quarter of the model's reach and two of its
+/// diameters, at most a few, largest first; a view cut in parts also as a whole.
+std::vector<std::vector<Eigen::Index>> object_parts(const PointCloud& searched,
+                                                    const std::optional<SupportPlane>& plane,
+                                                    double reach, double voxel_size);
+
+/// The whole of a single view as the one part (no support plane to cut it).
+std::vector<Eigen::Index> whole_view(const PointCloud& searched);
+
+/// With guess_distance: keeps the parts that the model could reach from the guess.
+void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
+                           std::vector<std::vector<Eigen::Index>>& parts);
+
+/// The range image of a single view, or none (a scene seen from all sides, declared or
+/// detected).
+std::optional<RangeImage> single_view_image(const PointCloud& scene, const AlignParams& params);
+
+/// The sensor origin of the scene as the settings give it (sensor_origin, or the
+/// deprecated scene_viewpoint).
+Eigen::Vector3d scene_sensor_origin(const AlignParams& params);
+
+}  // namespace spectral_vs::detail

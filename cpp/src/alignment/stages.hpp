@@ -1,0 +1,97 @@
+#pragma once
+// Internal to align(): what its stages pass between them. The stages, in the order
+// align() runs them (docs/architecture.md):
+//   scene_preparation  the support plane, the connected parts, the single-view check;
+//   hypotheses         the SO(3) search (global or per part), placement, ranking;
+//   refinement         Algorithm 1 from each hypothesis, the flat-axis sweep, the polish,
+//                      the ICP;
+//   verifier           the one score of a pose (fitness, confidence, inliers);
+//   alternatives       the other poses the scene supports about as well.
+
+#include <spectral_vs/alignment/aligner.hpp>
+
+#include "alignment/moving_model.hpp"
+#include "alignment/range_image.hpp"
+#include "alignment/scene_map.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <vector>
+
+namespace spectral_vs::detail {
+
+using Clock = std::chrono::steady_clock;
+
+// A model EGI whose smallest curvature is under this share of its largest has a flat
+// axis (measured at B = 16: mug 0.015, duck 0.08; bunny 0.44, box 0.31, others 0.57-0.8).
+constexpr double kFlatAxisRatio = 0.1;
+constexpr double kFlatAxisStep = 15.0 * M_PI / 180.0;  // turns tried about the flat axis
+
+// The moving model scored against the scene: against what its sensor saw, with depths
+// within `tolerance` metres, when the scene is one view.
+class ScoredModel : public MovingModel {
+ public:
+  using MovingModel::MovingModel;
+
+  double fitness(const SceneMap& scene, const RangeImage* view, const Pose& pose,
+                 double tolerance) {
+    const Points& normals = turned_normals(pose);
+    const Points& moved = move(pose);
+    return view ? view->check(moved, normals, tolerance).fitness() : scene.fitness(moved, normals);
+  }
+};
+
+// What Algorithm 1 works with: the scene, the model, the EGI correlation it ascends,
+// and the translation grids. The paper's mode starts on the grid over the whole scene
+// and moves to a window once the translation steps fit in it.
+struct Problem {
+  const SceneMap& scene;
+  const RangeImage* view;  // the scene's range image, for a single view
+  ScoredModel& model;
+  const ShCoefficients& model_coefficients;
+  const AlignParams& params;
+  double margin;
+  Clock::time_point deadline = Clock::time_point::max();    // of params.max_seconds
+  std::optional<Eigen::Vector3d> flat_axis = std::nullopt;  // of the model's EGI, if it has one
+  bool dense_model = true;  // at least kPolishMinDensity points per occupied voxel
+  std::optional<Eigen::Vector3d> viewpoint = std::nullopt;  // the sensor of a single view
+};
+
+/// The time limit of params.max_seconds has passed.
+inline bool expired(const Problem& problem) { return Clock::now() > problem.deadline; }
+
+/// A pose to refine: where the search found it (its rank in the SO(3) search, or -1
+/// for the initial guess) and its fitness.
+struct Hypothesis {
+  int index = 0;
+  Pose pose;
+  double fitness = 0.0;
+};
+
+/// Fittest first; equals keep their order.
+inline void rank(std::vector<Hypothesis>& hypotheses) {
+  std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
+}
+
+inline Eigen::AlignedBox3d box_of(const Points& points) {
+  return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(),
+                             points.colwise().maxCoeff().transpose());
+}
+
+/// A guess's neighbourhood (AlignParams::guess_angle_deg, guess_distance) is set.
+bool has_neighbourhood(const AlignParams& p);
+
+/// The window's margin around the model (AlignParams::window_margin, or from the voxels),
+/// metres.
+double window_margin(double search_voxel, const AlignParams& params);
+
+/// Places the translation window, made once (its FFT plans are re-used) and moved to
+/// each place Algorithm 1 runs.
+void place_window(const Problem& problem, std::optional<TranslationWindow>& window,
+                  const Eigen::Vector3d& centre);
+
+}  // namespace spectral_vs::detail
