@@ -282,6 +282,7 @@ SERVO_STAGES = {
     "_crop": "crop (max_depth)",
     "_stale": "stale-frame test (fingerprint)",
     "_prepare": "voxel downsampling",
+    "_relocalize": "relocalization (align_views)",
     "twist": "control law",
 }
 

@@ -810,8 +810,10 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
     SceneThenWindow source(problem, whole_scene, window);
     AlignResult result = run_algorithm1(problem, correlation, scene_coefficients, start, source,
                                         params.max_iterations);
-    detail::set_verification(result, detail::Verifier(scene, params.voxel_size, viewpoint)
-                                         .verify(model, result.T_scene_model));
+    if (params.verify) {
+      detail::set_verification(result, detail::Verifier(scene, params.voxel_size, viewpoint)
+                                           .verify(model, result.T_scene_model));
+    }
     return finish(std::move(result));
   }
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
