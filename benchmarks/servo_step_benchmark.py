@@ -59,6 +59,7 @@ Needs pybullet.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import os
@@ -282,6 +283,7 @@ SERVO_STAGES = {
     "_crop": "crop (max_depth)",
     "_stale": "stale-frame test (fingerprint)",
     "_prepare": "voxel downsampling",
+    "_relocalize": "relocalization (align_views)",
     "twist": "control law",
 }
 
@@ -380,6 +382,37 @@ def closed_loop(set_name: str, count: int, seed: int) -> dict[str, Any]:
     return {"steps": len(steps), "stages_ms": stages, "runs": runs, "converged": len(converged)}
 
 
+def verification_cost(calls: int = 60) -> dict[str, float]:
+    """Median CPU time (ms) of the servo's tracking registration with and without the pose
+    verification (``AlignParams.verify``) on two near-goal views (3% of the way to moderate
+    starts 0 and 1), the two aligners called in turn so that both see the same load."""
+    with sim.PyBulletRobot(sim.SimParams()) as robot:
+        reference = robot.capture()
+        home = np.asarray(robot.joint_positions())
+        views = []
+        for q, _, _ in servo_lib.start_poses(robot.kinematics, "moderate", 2, 0):
+            robot.reset_joint_positions(home + 0.03 * (np.asarray(q) - home))
+            views.append(robot.capture())
+    servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams())
+    assert servo._tracking_aligner is not None
+    off = servo._tracking_aligner.params
+    on = copy.copy(off)
+    on.verify = True
+    aligners = {
+        "verify off": _core.ModelAligner(servo.reference, off),
+        "verify on": _core.ModelAligner(servo.reference, on),
+    }
+    scenes = [servo._prepare(servo._crop(view), "current") for view in views]
+    times: dict[str, list[float]] = {name: [] for name in aligners}
+    for _ in range(calls):
+        for scene in scenes:
+            for name, aligner in aligners.items():
+                start = time.process_time()
+                aligner.align(scene)
+                times[name].append(1000.0 * (time.process_time() - start))
+    return {name: median(values) for name, values in times.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--starts", type=int, default=3, help="moderate starts (default 3)")
@@ -395,7 +428,14 @@ def main() -> None:
     )
     parser.add_argument("--set-starts", type=int, default=20, help="starts per set (20)")
     parser.add_argument("--skip-views", action="store_true", help="only the closed loop")
+    parser.add_argument(
+        "--verification", action="store_true", help="only the pose verification's cost"
+    )
     args = parser.parse_args()
+    if args.verification:
+        for name, value in verification_cost().items():
+            print(f"tracking registration, {name}: {value:.2f} ms (median CPU)")
+        return
     results = {} if args.skip_views else run(args)
     if args.sets:
         results.setdefault("machine", report_lib.machine())

@@ -148,6 +148,11 @@ max_voxels : int
 max_alternatives : int
     With global search: at most this many alternatives reported (``AlignResult.alternatives``),
     in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
+verify : bool
+    Without global search: verify the final pose (``AlignResult.confidence``, ``inliers``,
+    ``inlier_rmse``, ``inlier_distance``; default True). False leaves those 0, with the same
+    pose, fitness and history bit for bit (a tracker that reads only the fitness). With
+    global search the poses are always verified.
 )doc");
   align_params.attr("_deprecated_aliases") = py::make_tuple("scene_viewpoint");
   define_settings(align_params)
@@ -221,7 +226,8 @@ max_alternatives : int
       .def_property(
           "max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
           [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
-      .def_readwrite("max_alternatives", &AlignParams::max_alternatives);
+      .def_readwrite("max_alternatives", &AlignParams::max_alternatives)
+      .def_readwrite("verify", &AlignParams::verify);
 
   py::class_<AlignIteration>(m, "AlignIteration", "One iteration of Algorithm 1, after its update.")
       .def_readonly("translation_cost", &AlignIteration::translation_cost,

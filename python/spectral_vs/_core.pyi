@@ -379,6 +379,7 @@ class AlignParams:
         threads: int = ...,
         max_voxels: int = ...,
         max_alternatives: int = ...,
+        verify: bool = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
@@ -424,6 +425,7 @@ class AlignParams:
     threads: int
     max_voxels: int
     max_alternatives: int
+    verify: bool  # without global search; False: confidence, inliers stay 0
 
 class AlignIteration:
     """One iteration of Algorithm 1, after its update."""

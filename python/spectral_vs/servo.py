@@ -286,6 +286,14 @@ class ServoParams:
         Least number of steps from an unconfirmed relocalization to the next, in [1,
         ``relocalize_interval``]: from a view the search cannot register (the views share
         too little) the camera moves on, and a later view may do.
+    relocalize_backoff : int
+        Growth of that spacing while the relocalizations stay unconfirmed, >= 1: after
+        ``n`` unconfirmed ones in a row the next waits ``relocalize_retry *
+        relocalize_backoff^(n - 1)`` steps, at most ``relocalize_interval`` (2, 4, 8, 10
+        steps by default). A global registration costs 0.1-0.35 s, 20-70 steps of
+        tracking: a start that stays lost spent a relocalization every other step, and
+        their time set the 95th percentile of the step time (docs/servoing.md). 1: a
+        fixed ``relocalize_retry``. Counted afresh once an estimate is confident again.
     relocalize_score : float
         Least support score (:class:`spectral_vs.ViewSupport`) of a global registration
         that the servo takes, in [0, 1]; below it the step goes on from its own estimate.
@@ -355,6 +363,7 @@ class ServoParams:
     relocalize_fitness: float = 0.8
     relocalize_interval: int = 10
     relocalize_retry: int = 2
+    relocalize_backoff: int = 2
     relocalize_score: float = 0.05
     plane_turn: bool = True
     plane_cone: float = math.radians(20.0)
@@ -430,6 +439,8 @@ class ServoParams:
                 f"relocalize_retry must be in [1, relocalize_interval = "
                 f"{self.relocalize_interval}] steps, got {self.relocalize_retry}"
             )
+        if self.relocalize_backoff < 1:
+            raise ValueError(f"relocalize_backoff must be >= 1, got {self.relocalize_backoff}")
         if self.min_points < 1:
             raise ValueError(f"min_points must be >= 1, got {self.min_points}")
         if not (self.max_outage >= 0 and math.isfinite(self.max_outage)):
@@ -459,6 +470,8 @@ class ServoParams:
         params.bandwidth = self.bandwidth
         params.max_rotation_step = self.max_rotation_step
         params.initial_guess = np.eye(4)
+        # The servo reads only the fitness: no pose verification (2 ms per step).
+        params.verify = False
         unbounded = self.mode == "pose" and self.global_search
         params.max_translation = 0.0 if unbounded else self.max_translation
         if self.mode == "iteration":
@@ -945,6 +958,7 @@ class SpectralServo:
         self._lost = True  # no trusted estimate: the next step relocalizes
         self._since_relocalization: int | None = None  # steps since the last attempt
         self._confirmed = False  # the last relocalization was taken and confirmed
+        self._unconfirmed = 0  # relocalizations in a row not confirmed (the backoff)
         self._reset_faults()
 
     def _reset_faults(self) -> None:
@@ -985,6 +999,7 @@ class SpectralServo:
         self._lost = True
         self._since_relocalization = None
         self._confirmed = False
+        self._unconfirmed = 0
         self._reset_faults()
 
     @property
@@ -1032,15 +1047,26 @@ class SpectralServo:
         self, cloud: PointCloud, initial_guess: np.ndarray | None, aligner: ModelAligner
     ) -> tuple[np.ndarray, AlignResult]:
         """:meth:`estimate` of the cropped ``cloud`` with the given prepared reference."""
+        scene, result = self._register(cloud, initial_guess, aligner)
+        return self._turned(cloud, scene, np.asarray(result.T_scene_model)), result
+
+    def _register(
+        self, cloud: PointCloud, initial_guess: np.ndarray | None, aligner: ModelAligner
+    ) -> tuple[PointCloud, AlignResult]:
+        """The downsampled ``cloud`` and the registration of the reference onto it, without
+        the plane turn (a step turns only the estimate it keeps)."""
         scene = self._prepare(cloud, "current")
-        result = aligner.align(scene, initial_guess)
-        T = np.asarray(result.T_scene_model)
+        return scene, aligner.align(scene, initial_guess)
+
+    def _turned(self, cloud: PointCloud, scene: PointCloud, T: np.ndarray) -> np.ndarray:
+        """``T`` turned about the reference's dominant normal (``ServoParams.plane_turn``),
+        from the normals of ``cloud`` (those of its downsampled ``scene`` without)."""
         self._last_turn = 0.0
         if self._plane_turn is not None:
             normals = np.asarray((cloud if cloud.has_normals else scene).normals)
             self._last_turn = self._plane_turn.turn(normals, T)
             T = self._plane_turn.turned(T, self._last_turn)
-        return T, result
+        return T
 
     def twist(self, T_current_desired: np.ndarray) -> tuple[np.ndarray, float]:
         """The decoupled law and its saturation.
@@ -1183,31 +1209,42 @@ class SpectralServo:
         tracking = not record.relocalized and self._can_track(guess, motion)
         if tracking:
             assert self._tracking_aligner is not None
-            T, result = self._estimate(cloud, guess, self._tracking_aligner)
+            scene, result = self._register(cloud, guess, self._tracking_aligner)
             # Once locked on, a poor fit may mean the answer lies beyond the tracking bound
             # (the camera or the scene jumped): the full search decides, and the watchdog
             # sees the jump. Before, a poor fit is the relocalization's to judge.
             tracking = not self._armed or result.fitness >= p.watchdog_fitness
         if not tracking:
-            T, result = self._estimate(cloud, guess, self._aligner)
+            scene, result = self._register(cloud, guess, self._aligner)
         record.tracking = tracking
         last = result.history[-1] if len(result.history) else None
         record.fitness = float(result.fitness)
+        # Before lock-on the views share too little for Algorithm 1's step: the EGI
+        # correlation of two partial views peaks 10-20 degrees off the truth, and steps
+        # toward it drift away from a right global estimate. The last good estimate carried
+        # along the camera's measured motion is the estimate until the registration locks
+        # on (fitness watchdog_fitness).
+        record.carried = (
+            self._anchored
+            and not self._armed
+            and guess is not None
+            and record.fitness < p.watchdog_fitness
+        )
+        T = np.asarray(result.T_scene_model)
+        # The plane turn is of the estimate the step keeps, and of the confidence's pose
+        # under its threshold: a carried step with a confident fit uses neither.
+        if not record.carried or record.fitness < p.relocalize_fitness:
+            T = self._turned(cloud, scene, T)
         # fitness / share >= fitness: the share is needed only under the threshold.
         record.confidence = (
             min(1.0, record.fitness)
             if record.fitness >= p.relocalize_fitness
             else self._confidence(T, record.fitness, cloud)
         )
-        if self._anchored and not self._armed and guess is not None:
-            # Before lock-on the views share too little for Algorithm 1's step: the EGI
-            # correlation of two partial views peaks 10-20 degrees off the truth, and
-            # steps toward it drift away from a right global estimate. The last good
-            # estimate carried along the camera's measured motion is the estimate until
-            # the registration locks on (fitness watchdog_fitness).
-            record.carried = record.fitness < p.watchdog_fitness
-            if record.carried:
-                T = guess
+        if record.carried:
+            assert guess is not None
+            T = guess
+            self._last_turn = 0.0
         t_err, r_err = pose_error(T)
         record.T_current_desired = T
         record.translation_error, record.rotation_error = t_err, r_err
@@ -1244,6 +1281,8 @@ class SpectralServo:
         self._lost = not record.confidence >= p.relocalize_fitness
         if record.relocalized:
             self._confirmed = not self._lost
+        if not self._lost:
+            self._unconfirmed = 0
 
         if self._converged(record):
             record.status = _converged_status(t_err, r_err)
@@ -1254,12 +1293,16 @@ class SpectralServo:
 
     def _relocalization_due(self) -> bool:
         """Whether a relocalization may run now: none was tried yet, or the last was
-        ``relocalize_interval`` steps ago (``relocalize_retry`` when it was not confirmed)."""
+        ``relocalize_interval`` steps ago (when it was not confirmed, ``relocalize_retry``
+        grown by ``relocalize_backoff`` per unconfirmed one in a row before it)."""
         since = self._since_relocalization
         p = self.params
-        return since is None or since >= (
-            p.relocalize_interval if self._confirmed else p.relocalize_retry
-        )
+        if since is None:
+            return True
+        if self._confirmed:
+            return since >= p.relocalize_interval
+        growth = p.relocalize_backoff ** max(0, self._unconfirmed - 1)
+        return since >= min(p.relocalize_interval, p.relocalize_retry * growth)
 
     def _confidence(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
         """``fitness`` over the share of the reference that ``T`` puts inside the field of
@@ -1283,6 +1326,7 @@ class SpectralServo:
         prior = None if self._previous is None or not self._anchored else self._predicted(motion)
         self._since_relocalization = 0
         self._confirmed = False
+        self._unconfirmed += 1  # until the step confirms it
         result = _align_views(self._reference_view, cloud, self._view_params, prior)
         record.relocalization_score = float(result.support.score)
         record.relocalization_prior = prior is not None and result.hypothesis == -1

@@ -3,6 +3,7 @@ alignment on a sequence of servo views, and the servo's estimate made with it.""
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -99,3 +100,59 @@ def test_servo_estimate_is_the_plain_alignment(views):
     t, r = pose_error(np.linalg.inv(truth) @ T)
     assert 1000 * t < 3.0
     assert math.degrees(r) < 1.0
+
+
+def test_servo_registrations_skip_the_verification_and_change_nothing(views):
+    """The servo reads only the fitness, so its registrations run without the pose
+    verification (``AlignParams.verify`` off): the same pose, fitness and history, bit for
+    bit, as the verified call, on the full and the tracking bound; only the verification's
+    figures stay 0."""
+    reference, currents = views
+    servo_params = ServoParams()
+    assert svs.AlignParams().verify is True
+    assert servo_params.align_params().verify is False
+    for bound in (servo_params.max_translation, servo_params.tracking_translation):
+        unverified = servo_params.align_params()
+        unverified.max_translation = bound
+        verified = copy.copy(unverified)
+        verified.verify = True
+        with_check = _core.ModelAligner(reference, verified)
+        without_check = _core.ModelAligner(reference, unverified)
+        for current in currents:
+            a, b = with_check.align(current), without_check.align(current)
+            assert np.array_equal(np.asarray(a.T_scene_model), np.asarray(b.T_scene_model))
+            assert a.fitness == b.fitness and a.correlation == b.correlation
+            assert [x.translation_cost for x in a.history] == [
+                x.translation_cost for x in b.history
+            ]
+            assert b.confidence == 0.0 and b.inliers == 0 and b.inlier_rmse == 0.0
+        # The last view is the reference's pose: the verified call confirms it.
+        assert a.confidence > 0.8 and a.inliers > 0.8 * len(reference)
+        assert 1000 * a.inlier_rmse < 5.0
+
+
+def test_servo_steps_are_the_same_with_the_verification(views):
+    """A servo run over a sequence of views approaching the goal, with the verification
+    turned back on (``align_overrides``): every step's estimate and fitness are the default
+    servo's, bit for bit, tracking steps included."""
+    scene = table_top()
+    reference = view(scene, camera_pose())
+    poses = [
+        camera_pose((0.02 * s, -0.015 * s, 0.01 * s), (1.5 * s, -1.0 * s, 2.0 * s))
+        for s in (1.0, 0.8, 0.6, 0.45, 0.3, 0.2, 0.1)
+    ]
+    servos = [
+        SpectralServo(reference, ServoParams()),
+        SpectralServo(reference, ServoParams(align_overrides={"verify": True})),
+    ]
+    records = [[], []]
+    for servo, out in zip(servos, records, strict=True):
+        previous = None
+        for pose in poses:
+            motion = None if previous is None else np.linalg.inv(previous) @ pose
+            out.append(servo.step_record(view(scene, pose), motion, now=len(out) * 0.1)[2])
+            previous = pose
+    for a, b in zip(*records, strict=True):
+        assert np.array_equal(a.T_current_desired, b.T_current_desired)
+        assert a.fitness == b.fitness and a.tracking == b.tracking
+    assert any(r.tracking for r in records[0])

@@ -120,6 +120,29 @@ def test_relocalizations_are_spaced_out(large_start):
         assert log.records[after - 1].confidence < params.relocalize_fitness
 
 
+def test_unconfirmed_relocalizations_back_off(large_start):
+    # No global registration is taken (relocalize_score 1) and the view stays lost: the
+    # spacing doubles after each unconfirmed attempt, from relocalize_retry up to
+    # relocalize_interval (2, 4, 8, 10 steps), instead of a global registration every
+    # other step; relocalize_backoff 1 keeps it at relocalize_retry.
+    params = ServoParams(relocalize_score=1.0)
+    assert (params.relocalize_retry, params.relocalize_backoff) == (2, 2)
+    log, _ = run(large_start, params, max_steps=25)
+    assert all(r.confidence < params.relocalize_fitness for r in log.records)
+    attempts = [r.step for r in log.records if not np.isnan(r.relocalization_score)]
+    assert attempts == [0, 2, 6, 14, 24]
+    fixed, _ = run(large_start, ServoParams(relocalize_score=1.0, relocalize_backoff=1), 9)
+    assert [r.step for r in fixed.records if not np.isnan(r.relocalization_score)] == [
+        0,
+        2,
+        4,
+        6,
+        8,
+    ]
+    with pytest.raises(ValueError, match="relocalize_backoff must be >= 1"):
+        ServoParams(relocalize_backoff=0)
+
+
 def test_the_relocalized_estimate_is_carried_until_lock_on(large_start):
     # From the large start the global registration is taken at the first step; until the
     # registration locks on, the estimate is that pose carried along the camera's motion,

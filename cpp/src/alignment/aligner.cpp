@@ -89,9 +89,12 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
   AlignResult result =
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
                               source, params.max_iterations);
-  set_verification(
-      result,
-      Verifier(scene, params.voxel_size, prepared.viewpoint).verify(model, result.T_scene_model));
+  // The servo reads only the fitness; the check (AlignParams::verify) is its to skip.
+  if (params.verify) {
+    set_verification(
+        result,
+        Verifier(scene, params.voxel_size, prepared.viewpoint).verify(model, result.T_scene_model));
+  }
   return result;
 }
 

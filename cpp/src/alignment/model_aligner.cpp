@@ -169,9 +169,11 @@ struct ModelAligner::Impl {
     timings.records = loop_timings.records;
     t = Clock::now();
     result.fitness = fitness(scene, map, pose);
-    detail::set_verification(result,
-                             detail::Verifier(scene, params.voxel_size, detail::declared_viewpoint(params))
-                                 .verify(model, result.T_scene_model));
+    if (params.verify) {
+      detail::set_verification(
+          result, detail::Verifier(scene, params.voxel_size, detail::declared_viewpoint(params))
+                      .verify(model, result.T_scene_model));
+    }
     timings.fitness = seconds_since(t);
     return result;
   }
