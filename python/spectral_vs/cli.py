@@ -602,6 +602,7 @@ def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any)
         f"  {1000 * record.seconds:4.0f} ms"
         + (f"  relocalized (score {record.relocalization_score:.2f})" if record.relocalized else "")
         + (f"  held: {record.hold}" if record.hold else "")
+        + (f"  recovering: {record.recovery}" if record.recovery else "")
     )
 
 
