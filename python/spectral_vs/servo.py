@@ -300,9 +300,9 @@ class ServoParams:
         ``plane_cone``; a table top), it levels the camera onto it: the rotation that takes
         the reference's plane normal to where the current view sees its own, about the
         camera's origin, and the distance to the plane of the reference plus
-        ``recover_backoff``. Otherwise it backs off along its optical axis by
-        ``recover_backoff`` from where the recovery started. 0: no recovery.
-    recover_backoff : float
+        ``recover_standoff``. Otherwise it backs off along its optical axis by
+        ``recover_standoff`` from where the recovery started. 0: no recovery.
+    recover_standoff : float
         How much farther from the scene than the reference the recovery takes the camera,
         m (>= 0): a farther view sees more of the scene.
     recover_steps : int
@@ -376,7 +376,7 @@ class ServoParams:
     relocalize_retry: int = 2
     relocalize_score: float = 0.05
     recover_after: int = 3
-    recover_backoff: float = 0.15
+    recover_standoff: float = 0.15
     recover_steps: int = 60
     plane_turn: bool = True
     plane_cone: float = math.radians(20.0)
@@ -457,9 +457,9 @@ class ServoParams:
                 f"recover_after must be >= 0 relocalizations (0: no recovery), "
                 f"got {self.recover_after}"
             )
-        if not (self.recover_backoff >= 0 and math.isfinite(self.recover_backoff)):
+        if not (self.recover_standoff >= 0 and math.isfinite(self.recover_standoff)):
             raise ValueError(
-                f"recover_backoff must be finite and >= 0 m, got {self.recover_backoff}"
+                f"recover_standoff must be finite and >= 0 m, got {self.recover_standoff}"
             )
         if self.recover_steps < 1:
             raise ValueError(f"recover_steps must be >= 1 step, got {self.recover_steps}")
@@ -620,7 +620,7 @@ class ServoRecord:
     recovery : str
         ``""``, or how the step moved the camera to widen its overlap with the reference
         (``ServoParams.recover_after``): ``"level"`` (onto the reference's plane, at its
-        distance plus ``recover_backoff``) or ``"back_off"`` (along the optical axis).
+        distance plus ``recover_standoff``) or ``"back_off"`` (along the optical axis).
         ``T_current_desired`` and the errors are then those of the recovery's target pose,
         no registration ran (``fitness`` and ``confidence`` NaN), and the step never
         converges.
@@ -1425,7 +1425,7 @@ class SpectralServo:
             if self._T_motion_backoff is None:
                 self._T_motion_backoff = motion.copy()
             T = np.eye(4)
-            T[2, 3] = -p.recover_backoff
+            T[2, 3] = -p.recover_standoff
             T = _rigid_inverse(motion) @ self._T_motion_backoff @ T
             record.recovery = "back_off"
         record.T_current_desired = T
@@ -1437,7 +1437,7 @@ class SpectralServo:
     def _level_target(self, cloud: PointCloud) -> np.ndarray | None:
         """``T_current_target`` of the levelling recovery: the camera turned about its origin
         so that the reference's plane normal comes where the current view sees its plane's,
-        at the reference's distance to the plane plus ``recover_backoff``; None when the
+        at the reference's distance to the plane plus ``recover_standoff``; None when the
         reference or the current view has no dominant plane."""
         if self._reference_plane is None:
             return None
@@ -1457,7 +1457,7 @@ class SpectralServo:
         T = np.eye(4)
         T[:3, :3] = _turn_between(n_reference, n_current)
         # The target origin t lies at n.t + d_current from the plane.
-        T[:3, 3] = n_current * (d_reference + p.recover_backoff - d_current)
+        T[:3, 3] = n_current * (d_reference + p.recover_standoff - d_current)
         return T
 
     def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:

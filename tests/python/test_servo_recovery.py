@@ -75,7 +75,7 @@ def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
     # The current camera is tilted by 35 degrees about its x axis and 0.2 m nearer the
     # table: no relocalization is taken (relocalize_score 1), so from the first step on
     # (recover_after 1) the servo heads for the levelled pose: the tilt undone about the
-    # camera's origin, at the reference's 0.55 m from the plane plus recover_backoff.
+    # camera's origin, at the reference's 0.55 m from the plane plus recover_standoff.
     points, normals = table_scene()
     params = ServoParams(relocalize_score=1.0, relocalize_retry=1, recover_after=1, recover_steps=2)
     servo = SpectralServo(PointCloud(points, normals), params)
@@ -85,7 +85,7 @@ def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
     current = moved(points, normals, T_current_reference)
     n_current = T_current_reference[:3, :3] @ [0.0, 0.0, -1.0]
     d_current = 0.55 - n_current @ T_current_reference[:3, 3]  # the camera's distance
-    expected_t = n_current * (0.55 + params.recover_backoff - d_current)
+    expected_t = n_current * (0.55 + params.recover_standoff - d_current)
     for step in range(2):
         _, status, record = servo.step_record(current, np.eye(4), now=0.1 * step)
         assert status.state == "running" and record.recovery == "level"
@@ -125,8 +125,8 @@ def test_without_a_plane_the_recovery_backs_off_along_the_optical_axis():
 def test_recovery_settings_are_checked():
     with pytest.raises(ValueError, match="recover_after must be >= 0"):
         ServoParams(recover_after=-1)
-    with pytest.raises(ValueError, match="recover_backoff must be finite and >= 0 m"):
-        ServoParams(recover_backoff=math.inf)
+    with pytest.raises(ValueError, match="recover_standoff must be finite and >= 0 m"):
+        ServoParams(recover_standoff=math.inf)
     with pytest.raises(ValueError, match="recover_steps must be >= 1"):
         ServoParams(recover_steps=0)
 
