@@ -681,6 +681,8 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                     round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")
                 ],
                 "wall_s": log.wall_seconds,
+                "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
+                "relocalizations": int(sum(r.relocalized for r in log.records)),
             }
             runs.append(run)
             if talk:
