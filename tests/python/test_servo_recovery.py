@@ -73,11 +73,18 @@ def test_dominant_plane_finds_the_table_and_its_distance():
 
 def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
     # The current camera is tilted by 35 degrees about its x axis and 0.2 m nearer the
-    # table: no relocalization is taken (relocalize_score 1), so from the first step on
-    # (recover_after 1) the servo heads for the levelled pose: the tilt undone about the
-    # camera's origin, at the reference's 0.55 m from the plane plus recover_standoff.
+    # table: no relocalization is taken (relocalize_score and recover_score 1), so from
+    # the first step on (recover_after 1) the servo heads for the levelled pose: the tilt
+    # undone about the camera's origin, at the reference's 0.55 m from the plane plus
+    # recover_standoff.
     points, normals = table_scene()
-    params = ServoParams(relocalize_score=1.0, relocalize_retry=1, recover_after=1, recover_steps=2)
+    params = ServoParams(
+        relocalize_score=1.0,
+        recover_score=1.0,
+        relocalize_retry=1,
+        recover_after=1,
+        recover_steps=2,
+    )
     servo = SpectralServo(PointCloud(points, normals), params)
     T_current_reference = np.eye(4)
     T_current_reference[:3, :3] = rotation_matrix([math.radians(35.0), 0.0, 0.0])
@@ -108,7 +115,9 @@ def test_without_a_plane_the_recovery_backs_off_along_the_optical_axis():
     # pose 0.15 m back along the optical axis, carried along the camera's motion.
     points, normals = table_scene()
     sides = np.abs(normals[:, 2]) < 0.5
-    params = ServoParams(relocalize_score=1.0, relocalize_retry=1, recover_after=1)
+    params = ServoParams(
+        relocalize_score=1.0, recover_score=1.0, relocalize_retry=1, recover_after=1
+    )
     servo = SpectralServo(PointCloud(points[sides], normals[sides]), params)
     current = PointCloud(points[sides], normals[sides])
     _, _, first = servo.step_record(current, np.eye(4), now=0.0)
@@ -127,6 +136,8 @@ def test_recovery_settings_are_checked():
         ServoParams(recover_after=-1)
     with pytest.raises(ValueError, match="recover_standoff must be finite and >= 0 m"):
         ServoParams(recover_standoff=math.inf)
+    with pytest.raises(ValueError, match="recover_score must be in"):
+        ServoParams(recover_score=1.5)
     with pytest.raises(ValueError, match="recover_steps must be >= 1"):
         ServoParams(recover_steps=0)
 
