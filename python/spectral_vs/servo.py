@@ -78,6 +78,7 @@ REASONS = (
     "joint_limit",  # the joint velocity command had to clamp a joint at its position limit
     "max_steps",  # the step budget of run_servo is spent
     "max_time",  # the time budget of run_servo is spent (robot clock)
+    "lost",  # the recovery (ServoParams.recover_after) ran recover_steps without a relocalization
 )
 
 #: Why :class:`SpectralServo` held the robot still at a step (``ServoRecord.hold``; ``""``
@@ -297,6 +298,29 @@ class ServoParams:
     relocalize_score : float
         Least support score (:class:`spectral_vs.ViewSupport`) of a global registration
         that the servo takes, in [0, 1]; below it the step goes on from its own estimate.
+    recover_after : int
+        Recovery from a view the global registration cannot register (docs/servoing.md,
+        "Recovery"): after this many relocalizations in a row under ``relocalize_score``,
+        with none taken yet, the servo stops following its local estimate (which, from a
+        view that shares little with the reference, drifts farther off) and moves the
+        camera to widen the overlap, relocalizing on at ``relocalize_retry``. When both the
+        reference and the current view have a dominant plane (``min_plane_share``, within
+        ``plane_cone``; a table top), it levels the camera onto it: the rotation that takes
+        the reference's plane normal to where the current view sees its own, about the
+        camera's origin, and the distance to the plane of the reference plus
+        ``recover_standoff``. Otherwise it backs off along its optical axis by
+        ``recover_standoff`` from where the recovery started. 0: no recovery.
+    recover_standoff : float
+        How much farther from the scene than the reference the recovery takes the camera,
+        m (>= 0): a farther view sees more of the scene.
+    recover_score : float
+        Least support score of a global registration taken during the recovery, in [0, 1]
+        (``relocalize_score`` otherwise): the recovery widens the view step by step, so a
+        marginal score in its middle is waited out (a pose 17 degrees off scored 0.061
+        there; the right ones 0.09-0.19).
+    recover_steps : int
+        Longest recovery, steps (>= 1): when no relocalization was taken within it, the
+        servo stops with ``"lost"``.
     plane_turn : bool
         Turn each estimate about the reference's dominant normal (a table top's) by the
         step that ascends the correlation of the EGIs without that plane: a Newton step
@@ -365,6 +389,10 @@ class ServoParams:
     relocalize_retry: int = 2
     relocalize_backoff: int = 2
     relocalize_score: float = 0.05
+    recover_after: int = 3
+    recover_standoff: float = 0.15
+    recover_score: float = 0.08
+    recover_steps: int = 60
     plane_turn: bool = True
     plane_cone: float = math.radians(20.0)
     min_plane_share: float = 0.3
@@ -409,7 +437,7 @@ class ServoParams:
             raise ValueError(f"step_tolerance must be >= 0, got {self.step_tolerance}")
         if not 0.0 <= self.min_fitness <= 1.0:
             raise ValueError(f"min_fitness must be in [0, 1], got {self.min_fitness}")
-        for name in ("relocalize_fitness", "relocalize_score"):
+        for name in ("relocalize_fitness", "relocalize_score", "recover_score"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         if not 0.0 < self.plane_cone < math.pi / 2:
@@ -441,6 +469,17 @@ class ServoParams:
             )
         if self.relocalize_backoff < 1:
             raise ValueError(f"relocalize_backoff must be >= 1, got {self.relocalize_backoff}")
+        if self.recover_after < 0:
+            raise ValueError(
+                f"recover_after must be >= 0 relocalizations (0: no recovery), "
+                f"got {self.recover_after}"
+            )
+        if not (self.recover_standoff >= 0 and math.isfinite(self.recover_standoff)):
+            raise ValueError(
+                f"recover_standoff must be finite and >= 0 m, got {self.recover_standoff}"
+            )
+        if self.recover_steps < 1:
+            raise ValueError(f"recover_steps must be >= 1 step, got {self.recover_steps}")
         if self.min_points < 1:
             raise ValueError(f"min_points must be >= 1, got {self.min_points}")
         if not (self.max_outage >= 0 and math.isfinite(self.max_outage)):
@@ -597,6 +636,13 @@ class ServoRecord:
         The estimate is the last accepted one carried along the camera's measured motion,
         not the registration's: after a relocalization and before lock-on (a fitness of
         ``watchdog_fitness``), where the views share too little for Algorithm 1's step.
+    recovery : str
+        ``""``, or how the step moved the camera to widen its overlap with the reference
+        (``ServoParams.recover_after``): ``"level"`` (onto the reference's plane, at its
+        distance plus ``recover_standoff``) or ``"back_off"`` (along the optical axis).
+        ``T_current_desired`` and the errors are then those of the recovery's target pose,
+        no registration ran (``fitness`` and ``confidence`` NaN), and the step never
+        converges.
     """
 
     step: int
@@ -630,6 +676,7 @@ class ServoRecord:
     relocalization_prior: bool = False
     confidence: float = math.nan
     carried: bool = False
+    recovery: str = ""
     cpu_seconds: float = 0.0
 
 
@@ -786,6 +833,32 @@ def dominant_normal(normals: np.ndarray, cone: float) -> tuple[np.ndarray, float
         axis = normals[inside].mean(axis=0)
         axis = axis / np.linalg.norm(axis)
     return axis, float(inside.mean())
+
+
+def dominant_plane(
+    points: np.ndarray, normals: np.ndarray, cone: float, min_share: float
+) -> tuple[np.ndarray, float] | None:
+    """The dominant plane of a view (a table top), camera frame: its unit normal ``n``
+    (:func:`dominant_normal`, turned toward the camera) and the camera's distance to it,
+    ``d`` = -median(n . p) over the points whose normals lie within ``cone`` of ``n``, m;
+    None when fewer than ``min_share`` of the normals do or the camera is not in front of it.
+    """
+    normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+    axis, share = dominant_normal(normals, cone)
+    if share < min_share or share == 0.0:
+        return None
+    inside = normals @ axis > math.cos(cone)
+    distance = -float(np.median(np.asarray(points, dtype=float).reshape(-1, 3)[inside] @ axis))
+    return (axis, distance) if distance > 0 else None
+
+
+def _turn_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking the unit vector ``a`` to the unit vector ``b``."""
+    axis = np.cross(a, b)
+    sine = float(np.linalg.norm(axis))
+    if sine < 1e-12:
+        return np.eye(3)  # parallel (normals turned toward the camera are never opposite)
+    return rotation_matrix(axis / sine * math.atan2(sine, float(a @ b)))
 
 
 #: Fewest normals off the dominant plane (reference or current view) for the plane turn.
@@ -959,7 +1032,23 @@ class SpectralServo:
         self._since_relocalization: int | None = None  # steps since the last attempt
         self._confirmed = False  # the last relocalization was taken and confirmed
         self._unconfirmed = 0  # relocalizations in a row not confirmed (the backoff)
+        # The recovery's reference side: the plane it levels the camera onto, if any.
+        plane_source = cloud if cloud.has_normals else self.reference
+        self._reference_plane = dominant_plane(
+            np.asarray(plane_source.points),
+            np.asarray(plane_source.normals),
+            self.params.plane_cone,
+            self.params.min_plane_share,
+        )
+        self._reset_recovery()
         self._reset_faults()
+
+    def _reset_recovery(self) -> None:
+        """Forget the recovery: the failed relocalizations in a row, its steps so far and
+        where it started backing off from."""
+        self._failed_relocalizations = 0
+        self._recovery_steps = 0
+        self._T_motion_backoff: np.ndarray | None = None  # self._motion at the back-off start
 
     def _reset_faults(self) -> None:
         """Forget what the fault tests remember: the camera's motion since the last accepted
@@ -1000,6 +1089,7 @@ class SpectralServo:
         self._since_relocalization = None
         self._confirmed = False
         self._unconfirmed = 0
+        self._reset_recovery()
         self._reset_faults()
 
     @property
@@ -1202,6 +1292,8 @@ class SpectralServo:
         if p.relocalize and self._lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
             motion = self._motion
+        if self._recovering():
+            return self._recover(cloud, record, motion, now, start)
         guess = None
         if (p.warm_start or self._anchored) and self._previous is not None:
             guess = self._predicted(motion)
@@ -1294,13 +1386,16 @@ class SpectralServo:
     def _relocalization_due(self) -> bool:
         """Whether a relocalization may run now: none was tried yet, or the last was
         ``relocalize_interval`` steps ago (when it was not confirmed, ``relocalize_retry``
-        grown by ``relocalize_backoff`` per unconfirmed one in a row before it)."""
+        grown by ``relocalize_backoff`` per unconfirmed one in a row before it; while
+        recovering, ``relocalize_retry``: the recovery widens the view at every step)."""
         since = self._since_relocalization
         p = self.params
         if since is None:
             return True
         if self._confirmed:
             return since >= p.relocalize_interval
+        if self._recovering():
+            return since >= p.relocalize_retry
         growth = p.relocalize_backoff ** max(0, self._unconfirmed - 1)
         return since >= min(p.relocalize_interval, p.relocalize_retry * growth)
 
@@ -1330,13 +1425,96 @@ class SpectralServo:
         result = _align_views(self._reference_view, cloud, self._view_params, prior)
         record.relocalization_score = float(result.support.score)
         record.relocalization_prior = prior is not None and result.hypothesis == -1
-        if result.support.score < self.params.relocalize_score:
+        # While recovering the view widens step by step: a marginal score in the middle
+        # of it is worth waiting out (a 17-degree wrong pose scored 0.061 there).
+        least = self.params.recover_score if self._recovering() else self.params.relocalize_score
+        if result.support.score < least:
+            self._failed_relocalizations += 1
             return
+        self._reset_recovery()
         record.relocalized = True
         self._previous = np.asarray(result.T_current_reference)
         self._motion = np.eye(4)
         self._anchored = True
         self._lost = False
+
+    def _recovering(self) -> bool:
+        """Whether this step recovers (``ServoParams.recover_after``): no global registration
+        was taken yet and the last ``recover_after`` ones stayed under the score."""
+        p = self.params
+        return (
+            p.relocalize
+            and p.recover_after > 0
+            and not self._anchored
+            and self._failed_relocalizations >= p.recover_after
+        )
+
+    def _recover(
+        self,
+        cloud: PointCloud,
+        record: ServoRecord,
+        motion: np.ndarray,
+        now: float,
+        start: float,
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """A recovery step: the twist toward the pose that widens the view's overlap with
+        the reference (level onto its plane, else back off), or the stop ``"lost"`` once
+        ``recover_steps`` were spent; no registration runs."""
+        p = self.params
+        self._recovery_steps += 1
+        self._outage_start = now  # the frame was usable: no sensor outage
+        if self._recovery_steps > p.recover_steps:
+            record.status = ServoStatus(
+                "stopped",
+                "lost",
+                f"no relocalization reached relocalize_score {p.relocalize_score:g} within "
+                f"{p.recover_steps} recovery steps (last score "
+                f"{record.relocalization_score:.3f})",
+            )
+            record.seconds = time.perf_counter() - start
+            return record.twist, record.status, record
+        T = self._level_target(cloud)
+        record.recovery = "level"
+        if T is None:
+            # No plane to level onto: back off along the optical axis from where the
+            # recovery started, that pose carried along the camera's measured motion since.
+            if self._T_motion_backoff is None:
+                self._T_motion_backoff = motion.copy()
+            T = np.eye(4)
+            T[2, 3] = -p.recover_standoff
+            T = _rigid_inverse(motion) @ self._T_motion_backoff @ T
+            record.recovery = "back_off"
+        record.T_current_desired = T
+        record.translation_error, record.rotation_error = pose_error(T)
+        record.twist, record.saturation = self.twist(T)
+        record.seconds = time.perf_counter() - start
+        return record.twist, record.status, record
+
+    def _level_target(self, cloud: PointCloud) -> np.ndarray | None:
+        """``T_current_target`` of the levelling recovery: the camera turned about its origin
+        so that the reference's plane normal comes where the current view sees its plane's,
+        at the reference's distance to the plane plus ``recover_standoff``; None when the
+        reference or the current view has no dominant plane."""
+        if self._reference_plane is None:
+            return None
+        p = self.params
+        source = cloud if cloud.has_normals else self._prepare(cloud, "current")
+        stride = p.plane_turn_stride
+        current = dominant_plane(
+            np.asarray(source.points)[::stride],
+            np.asarray(source.normals)[::stride],
+            p.plane_cone,
+            p.min_plane_share,
+        )
+        if current is None:
+            return None
+        n_reference, d_reference = self._reference_plane
+        n_current, d_current = current
+        T = np.eye(4)
+        T[:3, :3] = _turn_between(n_reference, n_current)
+        # The target origin t lies at n.t + d_current from the plane.
+        T[:3, 3] = n_current * (d_reference + p.recover_standoff - d_current)
+        return T
 
     def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:
         """Add the camera's motion since the previous step (identity when not given) to the
@@ -2097,6 +2275,7 @@ __all__ = [
     "SpectralServo",
     "ViewCheck",
     "dominant_normal",
+    "dominant_plane",
     "plot_servo",
     "pose_error",
     "random_start",

@@ -107,9 +107,12 @@ def test_field_share_counts_what_lies_in_the_views_field():
 
 
 def test_relocalizations_are_spaced_out(large_start):
-    # No global registration is taken (relocalize_score 1): every attempt is unconfirmed,
+    # No global registration is taken (relocalize_score 1; no recovery, which would move
+    # the camera instead of registering: test_servo_recovery.py): every attempt is unconfirmed,
     # and the next comes relocalize_retry steps later, not at every step.
-    params = ServoParams(relocalize_score=1.0, relocalize_retry=3, relocalize_interval=6)
+    params = ServoParams(
+        relocalize_score=1.0, relocalize_retry=3, relocalize_interval=6, recover_after=0
+    )
     log, _ = run(large_start, params, max_steps=12)
     attempts = [r.step for r in log.records if not np.isnan(r.relocalization_score)]
     assert attempts[0] == 0 and len(attempts) >= 2

@@ -130,6 +130,7 @@ def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any)
         f"  {1000 * record.seconds:4.0f} ms"
         + (f"  relocalized (score {record.relocalization_score:.2f})" if record.relocalized else "")
         + (f"  held: {record.hold}" if record.hold else "")
+        + (f"  recovering: {record.recovery}" if record.recovery else "")
     )
 
 
@@ -208,6 +209,8 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                     round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")
                 ],
                 "wall_s": log.wall_seconds,
+                "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
+                "relocalizations": int(sum(r.relocalized for r in log.records)),
             }
             runs.append(run)
             if talk:
