@@ -13,7 +13,7 @@ the distance of the translations (mm). Success: under 5 degrees and 10 mm.
 
 Methods (one thread each, ``OMP_NUM_THREADS=1``, ``OMP_WAIT_POLICY=PASSIVE``):
 
-* ``ours``: ``spectral_vs.align_views(reference, current, current_viewpoint=...)`` with its
+* ``ours``: ``spectral_vs.align_views(reference, current, sensor_origin=...)`` with its
   defaults (every length derived from the views);
 * ``o3d_icp``: Open3D point-to-plane ICP from the identity (``peers.register``);
 * ``o3d_ransac``: Open3D FPFH + RANSAC + point-to-plane ICP (``peers.register``);
@@ -103,9 +103,7 @@ def run_method(method: str, pair: data.ViewPair, arrays: dict, voxel: float, see
         import spectral_vs as svs
 
         start, cpu_start = time.perf_counter(), time.process_time()
-        result = svs.align_views(
-            pair.reference, pair.current, current_viewpoint=pair.current_viewpoint
-        )
+        result = svs.align_views(pair.reference, pair.current, sensor_origin=pair.current_viewpoint)
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         T = np.asarray(result.T_current_reference)
         support = result.support

@@ -143,12 +143,27 @@ max_voxels : int
       .def(
           "estimate",
           [](PhaseCorrelation& self, const VoxelGrid& moving,
+             std::optional<Eigen::Vector3i> max_shift_voxels,
              std::optional<Eigen::Vector3i> max_shift) {
-            return max_shift ? self.estimate(moving, *max_shift) : self.estimate(moving);
+            if (max_shift) {
+              if (max_shift_voxels)
+                throw py::type_error("estimate() takes max_shift and max_shift_voxels, not "
+                                     "both: max_shift is the deprecated name");
+              if (PyErr_WarnEx(PyExc_DeprecationWarning,
+                               "PhaseCorrelation.estimate(max_shift=...) is deprecated: use "
+                               "max_shift_voxels=... (the bound is in voxels per axis)",
+                               1) != 0)
+                throw py::error_already_set();
+              max_shift_voxels = max_shift;
+            }
+            py::gil_scoped_release release;
+            return max_shift_voxels ? self.estimate(moving, *max_shift_voxels)
+                                    : self.estimate(moving);
           },
-          py::arg("moving"), py::arg("max_shift") = py::none(),
-          py::call_guard<py::gil_scoped_release>(),
-          "Shift of `moving` onto the target; `max_shift` (voxels per axis) bounds the search.")
+          py::arg("moving"), py::arg("max_shift_voxels") = py::none(), py::kw_only(),
+          py::arg("max_shift") = py::none(),
+          "Shift of `moving` onto the target; `max_shift_voxels` (voxels per axis, integers) "
+          "bounds the search. `max_shift` is its deprecated name.")
       .def_property_readonly("has_target", &PhaseCorrelation::has_target)
       .def_property_readonly("spec", &PhaseCorrelation::spec);
 

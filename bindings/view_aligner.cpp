@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 
 #include <sstream>
+#include <string>
 
 namespace spectral_vs::python {
 
@@ -40,9 +41,10 @@ refinement_iterations : int
     Iterations of Algorithm 1 per refinement, >= 1.
 icp_refinement : bool
     Point-to-plane ICP after Algorithm 1, kept where it does not lower the score.
-current_viewpoint : ndarray (3,)
+sensor_origin : ndarray (3,)
     The current view's sensor origin in its coordinates, m (the origin for a depth
-    camera's cloud in its own frame).
+    camera's cloud in its own frame), as AlignParams.sensor_origin. current_viewpoint is
+    a deprecated alias (DeprecationWarning).
 max_seconds : float
     Time budget, s (0: none).
 threads : int
@@ -61,6 +63,22 @@ std::string repr(const ViewSupport& s) {
       << ", confirmed=" << s.confirmed << ", contradicted=" << s.contradicted
       << ", hidden=" << s.hidden << ")";
   return out.str();
+}
+
+// The current view's sensor origin from 3 numbers, metres; ValueError naming `name`.
+void set_origin(ViewAlignParams& p, const py::handle& value, const char* name) {
+  const auto array = py::array_t<double, py::array::forcecast>::ensure(value);
+  if (!array || array.size() != 3)
+    throw py::value_error(std::string(name) + " must be 3 numbers (metres)");
+  p.sensor_origin = Eigen::Vector3d(array.at(0), array.at(1), array.at(2));
+}
+
+void warn_current_viewpoint() {
+  if (PyErr_WarnEx(PyExc_DeprecationWarning,
+                   "ViewAlignParams.current_viewpoint is deprecated: use sensor_origin, as "
+                   "AlignParams names the sensor",
+                   2) != 0)
+    throw py::error_already_set();
 }
 
 }  // namespace
@@ -91,6 +109,7 @@ void define_view_aligner(py::module_& m) {
       "from their median, search voxel twice that.");
 
   py::class_<ViewAlignParams> params(m, "ViewAlignParams", kViewAlignParamsDoc);
+  params.attr("_deprecated_aliases") = py::make_tuple("current_viewpoint");
   define_settings(params)
       .def_readwrite("voxel_size", &ViewAlignParams::voxel_size)
       .def_readwrite("search_voxel_size", &ViewAlignParams::search_voxel_size)
@@ -101,14 +120,20 @@ void define_view_aligner(py::module_& m) {
       .def_readwrite("refinements", &ViewAlignParams::refinements)
       .def_readwrite("refinement_iterations", &ViewAlignParams::refinement_iterations)
       .def_readwrite("icp_refinement", &ViewAlignParams::icp_refinement)
+      .def_property("sensor_origin",
+                    [](const ViewAlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
+                    [](ViewAlignParams& p, const py::handle& value) {
+                      set_origin(p, value, "sensor_origin");
+                    })
       .def_property(
           "current_viewpoint",
-          [](const ViewAlignParams& p) { return Eigen::Vector3d(p.current_viewpoint); },
+          [](const ViewAlignParams& p) {
+            warn_current_viewpoint();
+            return Eigen::Vector3d(p.sensor_origin);
+          },
           [](ViewAlignParams& p, const py::handle& value) {
-            const auto array = py::array_t<double, py::array::forcecast>::ensure(value);
-            if (!array || array.size() != 3)
-              throw py::value_error("current_viewpoint must be 3 numbers (metres)");
-            p.current_viewpoint = Eigen::Vector3d(array.at(0), array.at(1), array.at(2));
+            warn_current_viewpoint();
+            set_origin(p, value, "current_viewpoint");
           })
       .def_readwrite("max_seconds", &ViewAlignParams::max_seconds)
       .def_readwrite("threads", &ViewAlignParams::threads)

@@ -207,7 +207,9 @@ class PhaseCorrelation:
     def estimate(
         self,
         moving: VoxelGrid,
-        max_shift: npt.ArrayLike | None = None,  # (3,) int, voxels per axis
+        max_shift_voxels: npt.ArrayLike | None = None,  # (3,) int, voxels per axis
+        *,
+        max_shift: npt.ArrayLike | None = None,  # deprecated: max_shift_voxels
     ) -> TranslationEstimate: ...
     @property
     def has_target(self) -> bool: ...
@@ -644,6 +646,7 @@ class ViewAlignParams:
         refinements: int = ...,
         refinement_iterations: int = ...,
         icp_refinement: bool = ...,
+        sensor_origin: npt.ArrayLike = ...,
         current_viewpoint: npt.ArrayLike = ...,
         max_seconds: float = ...,
         threads: int = ...,
@@ -665,7 +668,11 @@ class ViewAlignParams:
     refinement_iterations: int
     icp_refinement: bool
     @property
-    def current_viewpoint(self) -> _Array: ...  # (3,) metres
+    def sensor_origin(self) -> _Array: ...  # (3,) metres
+    @sensor_origin.setter
+    def sensor_origin(self, value: npt.ArrayLike) -> None: ...
+    @property
+    def current_viewpoint(self) -> _Array: ...  # deprecated: sensor_origin
     @current_viewpoint.setter
     def current_viewpoint(self, value: npt.ArrayLike) -> None: ...
     max_seconds: float

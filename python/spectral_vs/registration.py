@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import difflib
 import math
 import numbers
 import warnings
@@ -68,16 +69,19 @@ def with_overrides(params: Any, kind: type, overrides: dict[str, Any], what: str
     Raises
     ------
     TypeError
-        For ``params`` of another type, or a value of the wrong type.
-    ValueError
-        For a field that ``kind`` does not have (named as ``what``).
+        For ``params`` of another type, a value of the wrong type, or a field that
+        ``kind`` does not have (named as ``what``, with the closest field names): as
+        ``kind(name=...)`` refuses it, an unexpected keyword argument.
     """
     if params is not None and not isinstance(params, kind):
         raise TypeError(f"params must be of type {kind.__name__}, got {type(params).__name__}")
     settings = copy.copy(params) if params is not None else kind()
     for name, value in overrides.items():
         if not hasattr(settings, name) or name.startswith("_"):
-            raise ValueError(f"unknown {what} {name!r}")
+            fields = [f for f in dir(settings) if not f.startswith("_")]
+            close = difflib.get_close_matches(name, fields, 3, 0.6)
+            hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+            raise TypeError(f"unknown {what} {name!r}: no {kind.__name__} field of that name{hint}")
         try:
             setattr(settings, name, value)
         except TypeError as error:
@@ -240,11 +244,12 @@ def align(
     ------
     ValueError
         For an empty cloud, an array of the wrong shape or dtype (integers are refused),
-        non-finite coordinates, an unknown setting in ``overrides``, a setting out of its
-        range, or a grid over ``max_voxels`` (refused before it is allocated); the message
-        names the argument or the limit.
+        non-finite coordinates, a setting out of its range, or a grid over ``max_voxels``
+        (refused before it is allocated); the message names the argument or the limit.
     TypeError
-        For ``params`` that is not an :class:`AlignParams`, or a setting of the wrong type.
+        For ``params`` that is not an :class:`AlignParams`, a setting of the wrong type,
+        or an unknown setting in ``overrides`` (named, as ``AlignParams(name=...)`` names
+        it).
 
     Notes
     -----

@@ -8,6 +8,7 @@ surfaces in the current view's coordinates. Every length is derived from the vie
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 from spectral_vs._core import (
@@ -38,8 +39,7 @@ def align_views(
     current: CloudLike,
     params: ViewAlignParams | None = None,
     *,
-    current_viewpoint: Any = (0.0, 0.0, 0.0),
-    reference_viewpoint: Any = (0.0, 0.0, 0.0),
+    reference_sensor_origin: Any = (0.0, 0.0, 0.0),
     prior: Any = None,
     **overrides: Any,
 ) -> ViewAlignResult:
@@ -53,17 +53,20 @@ def align_views(
         and turned toward the view's sensor.
     params : ViewAlignParams, optional
         Settings; defaults to ``ViewAlignParams()`` (every length derived from the views).
-    current_viewpoint : array_like (3,)
-        The current view's sensor origin in its coordinates, metres: the origin for a
-        depth camera's cloud in its own frame. The support check renders from it.
-    reference_viewpoint : array_like (3,)
-        The reference view's sensor origin, metres; used only to orient estimated normals.
+    reference_sensor_origin : array_like (3,)
+        The reference view's sensor origin in its coordinates, metres (default the
+        origin); used only to orient estimated normals. ``reference_viewpoint`` is a
+        deprecated alias (``DeprecationWarning``).
     prior : array_like (4, 4), optional
         A ``T_current_reference`` known from elsewhere (a tracker's estimate): refined and
         scored beside the search's hypotheses, and returned (``hypothesis`` -1) unless a
         searched pose is better supported.
     **overrides
         Any :class:`ViewAlignParams` field, e.g. ``hypotheses=24, voxel_size=0.02``.
+        The current view's sensor: ``sensor_origin`` (metres, in its coordinates, default
+        the origin: a depth camera's cloud in its own frame), as in :func:`align`; the
+        support check renders from it and estimated normals turn toward it.
+        ``current_viewpoint`` is a deprecated alias (``DeprecationWarning``).
 
     Returns
     -------
@@ -77,16 +80,33 @@ def align_views(
     ------
     ValueError
         For an empty view, an array of the wrong shape, non-finite coordinates, a
-        viewpoint that is not 3 finite numbers, an unknown or out-of-range setting, or a
+        sensor origin that is not 3 finite numbers, an out-of-range setting, or a
         grid over ``max_voxels``, a prior that is not a rigid 4 x 4 transform; the message
         names the argument. Views that share no
         surface are not an error: the result's ``status`` is ``"no_support"``.
     TypeError
-        For ``params`` that is not a :class:`ViewAlignParams`.
+        For ``params`` that is not a :class:`ViewAlignParams`, or an unknown setting in
+        ``overrides`` (named).
     """
+    overrides = dict(overrides)
+    if "reference_viewpoint" in overrides:
+        warnings.warn(
+            "align_views(reference_viewpoint=...) is deprecated: use reference_sensor_origin=...",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        reference_sensor_origin = overrides.pop("reference_viewpoint")
+    if "current_viewpoint" in overrides:
+        warnings.warn(
+            "align_views(current_viewpoint=...) is deprecated: use sensor_origin=..., the "
+            "current view's sensor origin as AlignParams.sensor_origin names it",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        overrides.setdefault("sensor_origin", overrides.pop("current_viewpoint"))
     settings = with_overrides(params, ViewAlignParams, overrides, "view alignment setting")
-    current_origin = check_viewpoint(current_viewpoint)
-    settings.current_viewpoint = current_origin
-    reference_view = _view(reference, "reference", check_viewpoint(reference_viewpoint))
+    current_origin = check_viewpoint(settings.sensor_origin, "sensor_origin")
+    reference_origin = check_viewpoint(reference_sensor_origin, "reference_sensor_origin")
+    reference_view = _view(reference, "reference", reference_origin)
     current_view = _view(current, "current", current_origin)
     return _align_views(reference_view, current_view, settings, prior)

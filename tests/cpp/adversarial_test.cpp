@@ -677,7 +677,7 @@ std::vector<Case> cases() {
          pc.set_target(g);
          pc.estimate(g, Eigen::Vector3i(-1, 0, 0));
        },
-       "max_shift must be >= 0"},
+       "max_shift_voxels must be >= 0"},
       {"phase_single_voxel_shift_is_exact",
        [] {
          GridSpec spec = spec_of(16, 1.0);

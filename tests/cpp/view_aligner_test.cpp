@@ -52,7 +52,7 @@ struct TablePair : ::testing::Test {
     T_current_scan.topRightCorner<3, 1>() = Eigen::Vector3d(0.06, -0.05, 0.06);
     reference = view_of(scan, 0, 0, 480, 360, 0, Transform::Identity());
     current = view_of(scan, 160, 120, 480, 360, 1, T_current_scan);
-    params.current_viewpoint = T_current_scan.topRightCorner<3, 1>();
+    params.sensor_origin = T_current_scan.topRightCorner<3, 1>();
   }
   Points scan;
   Transform T_current_scan = Transform::Identity();
@@ -135,8 +135,8 @@ TEST(AlignViews, RefusesBadInput) {
   p.voxel_size = -1.0;
   EXPECT_NE(message(view, view, p).find("voxel_size"), std::string::npos);
   p = {};
-  p.current_viewpoint.x() = NAN;
-  EXPECT_NE(message(view, view, p).find("current_viewpoint"), std::string::npos);
+  p.sensor_origin.x() = NAN;
+  EXPECT_NE(message(view, view, p).find("sensor_origin"), std::string::npos);
   p = {};
   p.voxels_across = 2.0;
   EXPECT_NE(message(view, view, p).find("voxels_across"), std::string::npos);

@@ -762,8 +762,8 @@ CASES = [
     Case(
         "align/unknown setting",
         lambda f: svs.align(OBJECT, OBJECT, voxel=0.01),
-        ValueError,
-        "unknown alignment setting",
+        TypeError,
+        "unknown alignment setting 'voxel'",
     ),
     Case(
         "align/voxel NaN",

@@ -127,8 +127,13 @@ def test_bad_input():
         svs.align(model, scene, initial_guess=np.diag([2.0, 1, 1, 1]), downsample=False)
     with pytest.raises(ValueError, match="exceeds the limit of 1000 voxels"):
         svs.align(model, scene, max_voxels=1000, downsample=False)
-    with pytest.raises(ValueError, match="unknown alignment setting 'gain'"):
+    # An unknown setting is the TypeError that AlignParams(gain=0.1) raises, named.
+    with pytest.raises(TypeError, match="unknown alignment setting 'gain'"):
         svs.align(model, scene, gain=0.1)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'gain'"):
+        svs.AlignParams(gain=0.1)
+    with pytest.raises(TypeError, match=r"'voxel'.*did you mean .*'voxel_size'"):
+        svs.align(model, scene, voxel=0.01)
     with pytest.raises(ValueError, match="model must be a PointCloud or an"):
         svs.align(np.zeros((5, 4)), scene)
 

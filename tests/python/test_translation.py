@@ -92,11 +92,19 @@ def test_max_shift_bounds_the_search():
     correlation.set_target(svs.voxelize(svs.PointCloud(moved), spec))
     moving = svs.voxelize(svs.PointCloud(points), spec)
     free = correlation.estimate(moving)
-    bounded = correlation.estimate(moving, max_shift=(3, 3, 3))
-    wide = correlation.estimate(moving, max_shift=(8, 8, 8))
+    bounded = correlation.estimate(moving, max_shift_voxels=(3, 3, 3))
+    wide = correlation.estimate(moving, max_shift_voxels=(8, 8, 8))
     assert np.allclose(free.shift_voxels, [6, 0, 0], atol=0.5)
     assert np.all(np.abs(bounded.peak_voxels) <= 3)
     np.testing.assert_array_equal(wide.shift_voxels, free.shift_voxels)
+    # The old name, in voxels as the new one says: the same bound, with a warning.
+    with pytest.warns(DeprecationWarning, match="max_shift_voxels"):
+        old = correlation.estimate(moving, max_shift=(3, 3, 3))
+    np.testing.assert_array_equal(old.peak_voxels, bounded.peak_voxels)
+    with pytest.raises(TypeError, match="max_shift and max_shift_voxels"):
+        correlation.estimate(moving, max_shift_voxels=(3, 3, 3), max_shift=(3, 3, 3))
+    with pytest.raises(ValueError, match="max_shift_voxels must be >= 0"):
+        correlation.estimate(moving, max_shift_voxels=(3, -1, 3))
 
 
 def _numpy_phase_correlation(moving: np.ndarray, target: np.ndarray):
@@ -133,6 +141,6 @@ def test_bounded_search_matches_numpy_on_the_feasible_shifts():
             shifts = np.stack([g.ravel() for g in grid], axis=1)
             values = surface[tuple((shifts % np.asarray(dims)).T)]
             best = shifts[np.argmax(values)]
-            estimate = correlation.estimate(moving, max_shift=(bound, bound, bound))
+            estimate = correlation.estimate(moving, max_shift_voxels=(bound, bound, bound))
             np.testing.assert_array_equal(estimate.peak_voxels, best, err_msg=f"{trial} {bound}")
             assert estimate.peak == pytest.approx(values.max(), abs=1e-4)

@@ -26,9 +26,7 @@ def table_pairs(data_dir):
 
 def test_view_pairs_of_a_table_are_registered_within_2_mm_and_half_a_degree(table_pairs):
     for pair in table_pairs:
-        result = svs.align_views(
-            pair.reference, pair.current, current_viewpoint=pair.current_viewpoint
-        )
+        result = svs.align_views(pair.reference, pair.current, sensor_origin=pair.current_viewpoint)
         T = result.T_current_reference
         assert rotation_error_deg(pair.T_current_reference, T) < 0.5
         assert np.linalg.norm(T[:3, 3] - pair.T_current_reference[:3, 3]) < 0.002  # m
@@ -41,7 +39,7 @@ def test_view_pairs_of_a_table_are_registered_within_2_mm_and_half_a_degree(tabl
 
 def test_support_separates_the_truth_from_a_pose_5_degrees_off(table_pairs):
     pair = table_pairs[0]
-    params = svs.ViewAlignParams(current_viewpoint=pair.current_viewpoint)
+    params = svs.ViewAlignParams(sensor_origin=pair.current_viewpoint)
     truth = svs.view_support(pair.reference, pair.current, pair.T_current_reference, params)
     off = pair.T_current_reference.copy()
     angle = np.radians(5.0)
@@ -58,7 +56,7 @@ def test_arrays_without_normals_are_accepted(table_pairs):
     result = svs.align_views(
         np.asarray(pair.reference.points),
         np.asarray(pair.current.points),
-        current_viewpoint=pair.current_viewpoint,
+        sensor_origin=pair.current_viewpoint,
     )
     T = result.T_current_reference
     assert rotation_error_deg(pair.T_current_reference, T) < 1.0
@@ -74,19 +72,20 @@ def test_the_scale_is_derived_from_the_views_or_given(table_pairs):
     n = min(len(pair.reference), len(pair.current))
     assert scale.voxel_size == pytest.approx(max(scale.extent / 32, 3 * scale.extent / n**0.5))
     given = svs.align_views(
-        pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, voxel_size=0.03
+        pair.reference, pair.current, sensor_origin=pair.current_viewpoint, voxel_size=0.03
     )
     assert given.scale.voxel_size == 0.03
     assert given.scale.search_voxel_size == 0.06
 
 
 def test_settings_take_keywords_and_show_every_field():
-    params = svs.ViewAlignParams(hypotheses=24, refinements=4, current_viewpoint=(0, 0.1, 0))
+    params = svs.ViewAlignParams(hypotheses=24, refinements=4, sensor_origin=(0, 0.1, 0))
     assert params.hypotheses == 24 and params.refinements == 4
-    np.testing.assert_array_equal(params.current_viewpoint, [0, 0.1, 0])
+    np.testing.assert_array_equal(params.sensor_origin, [0, 0.1, 0])
     text = repr(params)
-    for name in ("voxel_size", "hypotheses", "refinements", "current_viewpoint", "threads"):
+    for name in ("voxel_size", "hypotheses", "refinements", "sensor_origin", "threads"):
         assert name in text
+    assert "current_viewpoint" not in text  # a deprecated alias, not a field
     assert copy.copy(params).hypotheses == 24
     with pytest.raises(TypeError, match="unexpected keyword argument 'hypothesis'"):
         svs.ViewAlignParams(hypothesis=3)
@@ -98,9 +97,14 @@ def test_bad_input_names_the_argument(table_pairs):
         svs.align_views(np.zeros((0, 3)), pair.current)
     with pytest.raises(ValueError, match="current must be a PointCloud or an"):
         svs.align_views(pair.reference, np.zeros((10, 4)))
-    with pytest.raises(ValueError, match="viewpoint must be 3 finite numbers"):
-        svs.align_views(pair.reference, pair.current, current_viewpoint=(0, np.nan, 0))
-    with pytest.raises(ValueError, match="unknown view alignment setting 'hypothesis'"):
+    with pytest.raises(ValueError, match="sensor_origin must be 3 finite numbers"):
+        svs.align_views(pair.reference, pair.current, sensor_origin=(0, np.nan, 0))
+    with pytest.raises(ValueError, match="reference_sensor_origin must be 3 finite"):
+        svs.align_views(pair.reference, pair.current, reference_sensor_origin=(np.inf, 0, 0))
+    # An unknown setting is refused as ViewAlignParams(hypothesis=3) refuses it.
+    with pytest.raises(
+        TypeError, match=r"unknown view alignment setting 'hypothesis'.*'hypotheses'"
+    ):
         svs.align_views(pair.reference, pair.current, hypothesis=3)
     with pytest.raises(ValueError, match="refinements must be in"):
         svs.align_views(pair.reference, pair.current, refinements=99)
@@ -131,7 +135,7 @@ def test_a_prior_is_kept_when_right_and_replaced_when_wrong(table_pairs):
     near = truth.copy()
     near[:3, 3] += np.array([0.003, 0.0, 0.0])
     kept = svs.align_views(
-        pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, prior=near
+        pair.reference, pair.current, sensor_origin=pair.current_viewpoint, prior=near
     )
     assert kept.hypothesis == -1
     assert rotation_error_deg(truth, kept.T_current_reference) < 0.5
@@ -142,13 +146,13 @@ def test_a_prior_is_kept_when_right_and_replaced_when_wrong(table_pairs):
     turn = np.eye(4)
     turn[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     wrong = svs.align_views(
-        pair.reference, pair.current, current_viewpoint=pair.current_viewpoint, prior=turn @ truth
+        pair.reference, pair.current, sensor_origin=pair.current_viewpoint, prior=turn @ truth
     )
     assert wrong.hypothesis >= 0
     assert rotation_error_deg(truth, wrong.T_current_reference) < 0.5
     assert np.linalg.norm(wrong.T_current_reference[:3, 3] - truth[:3, 3]) < 0.002  # m
     # Without a prior, the same pose as the search alone gives.
-    alone = svs.align_views(pair.reference, pair.current, current_viewpoint=pair.current_viewpoint)
+    alone = svs.align_views(pair.reference, pair.current, sensor_origin=pair.current_viewpoint)
     np.testing.assert_allclose(wrong.T_current_reference, alone.T_current_reference, atol=1e-12)
 
 
@@ -158,3 +162,28 @@ def test_a_prior_that_is_not_rigid_names_the_argument(table_pairs):
         svs.align_views(pair.reference, pair.current, prior=2.0 * np.eye(4))
     with pytest.raises(ValueError, match="prior"):
         svs.align_views(pair.reference, pair.current, prior=np.eye(3))
+
+
+def test_the_sensor_is_named_as_in_align_and_the_old_names_still_work(table_pairs):
+    """align_views(sensor_origin=p) as align() names it; current_viewpoint and
+    reference_viewpoint are deprecated aliases: the same pose, with a warning."""
+    pair = table_pairs[2]
+    origin = pair.current_viewpoint
+    new = svs.align_views(pair.reference, pair.current, sensor_origin=origin)
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        old = svs.align_views(pair.reference, pair.current, current_viewpoint=origin)
+    np.testing.assert_array_equal(old.T_current_reference, new.T_current_reference)
+    with pytest.warns(DeprecationWarning, match="reference_sensor_origin"):
+        svs.align_views(
+            pair.reference, pair.current, sensor_origin=origin, reference_viewpoint=(0, 0, 0)
+        )
+    # The origin in the settings is used as given (it is no longer overwritten by a
+    # keyword's default): the same pose as the keyword.
+    params = svs.ViewAlignParams(sensor_origin=origin)
+    given = svs.align_views(pair.reference, pair.current, params)
+    np.testing.assert_array_equal(given.T_current_reference, new.T_current_reference)
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        aliased = svs.ViewAlignParams(current_viewpoint=origin)
+    assert aliased == params
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        np.testing.assert_array_equal(aliased.current_viewpoint, origin)

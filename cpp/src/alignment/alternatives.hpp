@@ -22,7 +22,8 @@ struct AlternativeSources {
 
 /// The poses apart from `result`'s (rotation over kApartDegrees or model centroid over
 /// kApartMetres) and from each other, whose confidence is within kAlternativeMargin of
-/// result.confidence, each refined by point-to-plane ICP and verified; best first, at most
+/// result.confidence, each screened on a sparse model, refined by point-to-plane ICP and
+/// verified; best first, at most
 /// params.max_alternatives; the ICP sees the scene as a single view from `viewpoint` when
 /// there is one. Sets result.alternatives and result.ambiguous.
 void find_alternatives(const PointCloud& model, const Verifier& verifier,

@@ -40,11 +40,23 @@ Eigen::Index IcpScene::nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& 
   Eigen::Index best = -1;
   double best_squared = max_distance * max_distance;
   const Eigen::Array3i c = cell_of(p);
+  // Per axis, the squared distance from p to the cells below, at and above its own (0 at
+  // its own): a cell farther than the best pair so far cannot hold a nearer point. Most
+  // of the 26 neighbours are skipped so once a close pair is found.
+  Eigen::Array<double, 3, 3> gap;  // gap(axis, d + 1)
+  for (int axis = 0; axis < 3; ++axis) {
+    const double low = origin_[axis] + double(c[axis]) * cell_;
+    gap(axis, 0) = std::max(0.0, p[axis] - low);
+    gap(axis, 1) = std::max({0.0, low - p[axis], p[axis] - (low + cell_)});
+    gap(axis, 2) = std::max(0.0, low + cell_ - p[axis]);
+    for (int d = 0; d < 3; ++d) gap(axis, d) *= gap(axis, d);
+  }
   for (int dx = -1; dx <= 1; ++dx)
     for (int dy = -1; dy <= 1; ++dy)
       for (int dz = -1; dz <= 1; ++dz) {
         const Eigen::Array3i neighbour = c + Eigen::Array3i(dx, dy, dz);
         if ((neighbour < 0).any() || (neighbour >= dims_).any()) continue;
+        if (gap(0, dx + 1) + gap(1, dy + 1) + gap(2, dz + 1) >= best_squared) continue;
         const std::int64_t cell = linear(neighbour);
         for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
           const Eigen::Index i = rows_[k];

@@ -31,7 +31,9 @@ Verifier::Verifier(const PointCloud& scene, double voxel_size,
                    const std::optional<Eigen::Vector3d>& viewpoint)
     : voxel_size_(voxel_size),
       grid_(scene, grown_box(scene, kVisibilityVoxels * voxel_size),
-            kVisibilityVoxels * voxel_size) {
+            kVisibilityVoxels * voxel_size),
+      fine_grid_(scene, grown_box(scene, kVisibilityVoxels * voxel_size),
+                 kInlierVoxels * voxel_size) {
   if (viewpoint) view_.emplace(scene, *viewpoint, kPixelVoxels * voxel_size);
 }
 
@@ -49,7 +51,7 @@ PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) c
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Vector3d p = R * model.points().row(i).transpose() + t;
     const Eigen::Vector3d normal = R * model.normals().row(i).transpose();
-    const Eigen::Index nearest = grid_.nearest(p, normal, v.inlier_distance, -2.0);
+    const Eigen::Index nearest = fine_grid_.nearest(p, normal, v.inlier_distance, -2.0);
     double distance = INFINITY;
     if (nearest >= 0) {
       distance = (scene_points.row(nearest).transpose() - p).norm();

@@ -88,7 +88,7 @@ void check_params(const ViewAlignParams& p) {
     fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
   if (p.refinement_iterations < 1)
     fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
-  if (!p.current_viewpoint.allFinite()) fail("current_viewpoint must be finite");
+  if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
   if (!(p.max_seconds >= 0.0 && std::isfinite(p.max_seconds)))
     fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);
   if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
@@ -225,7 +225,7 @@ class SupportCheck {
   /// `current` as prepared (its depth image), `reference`: what of the reference is checked.
   SupportCheck(const PointCloud& current, const PointCloud& reference,
                const ViewAlignParams& params, const ViewScale& scale)
-      : image_(current, params.current_viewpoint, 0.5 * scale.voxel_size),
+      : image_(current, params.sensor_origin, 0.5 * scale.voxel_size),
         voxel_(scale.voxel_size) {
     const Eigen::Index count = reference.points().rows();
     const Eigen::Index stride = std::max<Eigen::Index>(1, count / kSupportPoints);
@@ -313,7 +313,7 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
   coarse_icp.max_distance = views.scale.search_voxel_size;
   coarse_icp.max_points = kCoarseIcpPoints;
   coarse_icp.max_iterations = kCoarseIcpIterations;
-  coarse_icp.viewpoint = views.params.current_viewpoint;
+  coarse_icp.viewpoint = views.params.sensor_origin;
   std::vector<Hypothesis> out;
   for (std::size_t h = 0; h < candidates.size(); ++h) {
     if (h > 0 && expired(views)) break;
@@ -343,7 +343,7 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
 // kIcpFineDistance of one; kept where it does not lower the support.
 void refine_with_icp(const Views& views, ViewAlignResult& result) {
   detail::IcpSettings icp;
-  icp.viewpoint = views.params.current_viewpoint;
+  icp.viewpoint = views.params.sensor_origin;
   Transform T = result.T_current_reference;
   int iterations = 0;
   for (const double share : {1.0, kIcpFineDistance}) {

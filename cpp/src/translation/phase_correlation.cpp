@@ -487,16 +487,16 @@ TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving) {
 }
 
 TranslationEstimate PhaseCorrelation::estimate(const VoxelGrid& moving,
-                                               const Eigen::Vector3i& max_shift) {
+                                               const Eigen::Vector3i& max_shift_voxels) {
   if (!impl_->has_target) fail("PhaseCorrelation: set_target() must be called before estimate()");
-  if ((max_shift.array() < 0).any())
-    fail("max_shift must be >= 0 voxels, got ", max_shift.transpose());
+  if ((max_shift_voxels.array() < 0).any())
+    fail("max_shift_voxels must be >= 0 voxels, got ", max_shift_voxels.transpose());
   require_same_spec(impl_->spec, moving, "moving");
   Impl& im = *impl_;
   im.transform(moving, im.spectrum.get());
   if (im.params.subvoxel) im.gather_low_bins();
   im.form_cross_power();
-  const Impl::FeasibleShifts feasible = im.feasible_shifts(moving, max_shift);
+  const Impl::FeasibleShifts feasible = im.feasible_shifts(moving, max_shift_voxels);
   im.inverse_transform(feasible);
 
   TranslationEstimate result;

@@ -51,7 +51,8 @@ struct ViewAlignParams {
                                    ///< lower the score.
   /// The current view's sensor origin in its coordinates: the origin for a depth
   /// camera's cloud in its own frame. The fitness renders the reference from it.
-  Eigen::Vector3d current_viewpoint = Eigen::Vector3d::Zero();
+  /// (Named current_viewpoint before 0.2.)
+  Eigen::Vector3d sensor_origin = Eigen::Vector3d::Zero();
   double max_seconds = 0.0;  ///< Time budget, seconds (0: none); past it, the best so far,
                              ///< converged = false.
   int threads = 1;           ///< Threads for FFTW and the SO(3) search, in [1, 256].
@@ -126,7 +127,7 @@ ViewSupport view_support(const PointCloud& reference, const PointCloud& current,
 /// relocalization thus never replaces a right estimate by a worse-supported one.
 /// @throws std::invalid_argument for an empty view, missing normals, non-finite or
 ///         out-of-range settings, a grid over params.limits, a current view with no
-///         point in front of current_viewpoint, or a prior that is not rigid.
+///         point in front of sensor_origin, or a prior that is not rigid.
 ViewAlignResult align_views(const PointCloud& reference, const PointCloud& current,
                             const ViewAlignParams& params = {},
                             const std::optional<Transform>& prior = std::nullopt);

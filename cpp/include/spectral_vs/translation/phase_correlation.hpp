@@ -59,10 +59,10 @@ class PhaseCorrelation {
   ///         `moving` is empty.
   TranslationEstimate estimate(const VoxelGrid& moving);
 
-  /// The same with the shift also bounded by |shift| <= max_shift (voxels, per axis).
+  /// The same with the shift also bounded by |shift| <= max_shift_voxels (per axis).
   /// A local search in a window needs a grid only as large as the window plus the
   /// bound, not the window plus the moving cloud, to be free of wrap-around.
-  TranslationEstimate estimate(const VoxelGrid& moving, const Eigen::Vector3i& max_shift);
+  TranslationEstimate estimate(const VoxelGrid& moving, const Eigen::Vector3i& max_shift_voxels);
 
   const GridSpec& spec() const;
 
