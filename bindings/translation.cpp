@@ -147,8 +147,9 @@ max_voxels : int
              std::optional<Eigen::Vector3i> max_shift) {
             if (max_shift) {
               if (max_shift_voxels)
-                throw py::type_error("estimate() takes max_shift and max_shift_voxels, not "
-                                     "both: max_shift is the deprecated name");
+                throw py::type_error(
+                    "estimate() takes max_shift and max_shift_voxels, not "
+                    "both: max_shift is the deprecated name");
               if (PyErr_WarnEx(PyExc_DeprecationWarning,
                                "PhaseCorrelation.estimate(max_shift=...) is deprecated: use "
                                "max_shift_voxels=... (the bound is in voxels per axis)",

@@ -120,11 +120,12 @@ void define_view_aligner(py::module_& m) {
       .def_readwrite("refinements", &ViewAlignParams::refinements)
       .def_readwrite("refinement_iterations", &ViewAlignParams::refinement_iterations)
       .def_readwrite("icp_refinement", &ViewAlignParams::icp_refinement)
-      .def_property("sensor_origin",
-                    [](const ViewAlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
-                    [](ViewAlignParams& p, const py::handle& value) {
-                      set_origin(p, value, "sensor_origin");
-                    })
+      .def_property(
+          "sensor_origin",
+          [](const ViewAlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
+          [](ViewAlignParams& p, const py::handle& value) {
+            set_origin(p, value, "sensor_origin");
+          })
       .def_property(
           "current_viewpoint",
           [](const ViewAlignParams& p) {

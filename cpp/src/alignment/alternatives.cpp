@@ -126,8 +126,9 @@ bool flat_along_turn(const PointCloud& model, const Verifier& verifier, const Ca
                      const Transform& T, const Eigen::Vector3d& c, const Eigen::Vector3d& axis,
                      double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint) {
   const double angle = candidate.angle > M_PI ? candidate.angle - 2.0 * M_PI : candidate.angle;
-  const Transform half = refine_translation(
-      model, verifier.fine_grid(), turned(T, exp_so3(0.5 * angle * axis), c), voxel_size, viewpoint);
+  const Transform half =
+      refine_translation(model, verifier.fine_grid(), turned(T, exp_so3(0.5 * angle * axis), c),
+                         voxel_size, viewpoint);
   return verifier.verify(model, half).confidence <=
          candidate.verification.confidence + kTurnFlatness;
 }
@@ -236,8 +237,8 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   candidates = std::move(screened);
   for (Candidate& candidate : candidates) {
     if (candidate.turn) {
-      candidate.T =
-          refine_translation(model, verifier.fine_grid(), candidate.T, params.voxel_size, viewpoint);
+      candidate.T = refine_translation(model, verifier.fine_grid(), candidate.T, params.voxel_size,
+                                       viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
       continue;
     }

@@ -225,8 +225,7 @@ class SupportCheck {
   /// `current` as prepared (its depth image), `reference`: what of the reference is checked.
   SupportCheck(const PointCloud& current, const PointCloud& reference,
                const ViewAlignParams& params, const ViewScale& scale)
-      : image_(current, params.sensor_origin, 0.5 * scale.voxel_size),
-        voxel_(scale.voxel_size) {
+      : image_(current, params.sensor_origin, 0.5 * scale.voxel_size), voxel_(scale.voxel_size) {
     const Eigen::Index count = reference.points().rows();
     const Eigen::Index stride = std::max<Eigen::Index>(1, count / kSupportPoints);
     std::vector<Eigen::Index> rows;
