@@ -7,16 +7,17 @@ Servo (``--steps``, 10^4 by default): the simulation of ``spectral-vs servo-sim`
 frames are equal), the reference captured at home and the arm left there: every step
 captures a view and runs ``SpectralServo.step_record`` with the default ``ServoParams``;
 a running step sends its joint velocities, a converged one (the estimate within the
-servo's tolerances, 0.5 mm and 0.1 deg, and then until it leaves the re-engage bounds,
-3 mm and 1 deg) holds the arm still for the step, as a servo left running at its goal
-does (``run_servo`` would end the run there). The camera's true
-error from the reference pose (from PyBullet) is its drift at the goal.
+servo's tolerances, 0.5 mm and 0.1 deg, and then until it has left the re-engage
+bounds, 3 mm and 1 deg, for 3 steps in a row) holds the arm still for the step, as a
+servo left running at its goal does (``run_servo`` would end the run there). The
+camera's true error from the reference pose (from PyBullet) is its error at the goal;
+its motion from its pose at step 100, the drift.
 
 Alignments (``--alignments``, 10^4 by default): ``align()`` (default settings but
-``hypotheses=8``, ``max_alternatives=0``, 10 mm voxels) of the milk carton of ``../shared/data`` (downsampled to
-4 mm, normals) onto a copy moved by a seeded random motion (any rotation, up to 0.1 m),
-a new motion every call; every 100th call is the same fixed pair, whose pose must not
-change at all.
+``hypotheses=8``, ``max_alternatives=0``, 10 mm voxels) of the milk carton of
+``../shared/data`` (downsampled to 4 mm, normals) onto a copy moved by a seeded random
+motion (any rotation, up to 0.1 m), a new motion every call; every 100th call is the
+same fixed pair, whose pose must not change at all.
 
 Reported, for each loop: the resident memory (``VmRSS`` of ``/proc/self/status``) at
 steps 100, 1000 and the last, its growth after the warm-up (from step 100 to the last),

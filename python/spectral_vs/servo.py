@@ -207,6 +207,11 @@ class ServoParams:
         tolerances: no hysteresis. Only a servo stepped on after converging sees it
         (:func:`run_servo` ends at the first convergence); :meth:`SpectralServo.reset`
         forgets it.
+    reengage_steps : int
+        ... for this many steps in a row, >= 1: a single noisy view whose estimate leaves
+        the bounds does not move the arm, an offset that lasts does. With 1 the soak's
+        held camera re-engaged once in 900 steps (an estimate over 1 degree) and settled
+        0.5 degree away.
     max_linear_speed : float
         Saturation of ``|v|``, m/s.
     max_angular_speed : float
@@ -354,6 +359,7 @@ class ServoParams:
     step_tolerance: float = 0.0
     reengage_translation: float = 0.003
     reengage_rotation: float = math.radians(1.0)
+    reengage_steps: int = 3
     max_linear_speed: float = 0.1
     max_angular_speed: float = math.radians(20.0)
     jump_limit_translation: float = 0.1
@@ -454,6 +460,8 @@ class ServoParams:
                 f"relocalize_retry must be in [1, relocalize_interval = "
                 f"{self.relocalize_interval}] steps, got {self.relocalize_retry}"
             )
+        if self.reengage_steps < 1:
+            raise ValueError(f"reengage_steps must be >= 1 step, got {self.reengage_steps}")
         if self.min_points < 1:
             raise ValueError(f"min_points must be >= 1, got {self.min_points}")
         if not (self.max_outage >= 0 and math.isfinite(self.max_outage)):
@@ -970,6 +978,7 @@ class SpectralServo:
         self._since_relocalization: int | None = None  # steps since the last attempt
         self._confirmed = False  # the last relocalization was taken and confirmed
         self._settled = False  # converged and not re-engaged since (the hysteresis)
+        self._outside = 0  # settled steps in a row whose estimate left the re-engage bounds
         self._reset_faults()
 
     def _reset_faults(self) -> None:
@@ -1012,6 +1021,7 @@ class SpectralServo:
         self._since_relocalization = None
         self._confirmed = False
         self._settled = False
+        self._outside = 0
         self._reset_faults()
 
     @property
@@ -1272,7 +1282,10 @@ class SpectralServo:
         if record.relocalized:
             self._confirmed = not self._lost
 
-        self._settled = self._converged(record) or (self._settled and self._held(record))
+        converged = self._converged(record)
+        if converged:
+            self._outside = 0
+        self._settled = converged or (self._settled and self._held(record))
         if self._settled:
             record.status = _converged_status(t_err, r_err)
         else:
@@ -1409,12 +1422,15 @@ class SpectralServo:
         return p.step_tolerance > 0 and bool(eq17 < p.step_tolerance)
 
     def _held(self, record: ServoRecord) -> bool:
-        """Whether a converged servo stays so: the estimate within the re-engage bounds."""
+        """Whether a converged servo stays so: its estimate has not been outside the
+        re-engage bounds for ``reengage_steps`` steps in a row."""
         p = self.params
-        return bool(
+        inside = (
             record.translation_error <= p.reengage_translation
             and record.rotation_error <= p.reengage_rotation
         )
+        self._outside = 0 if inside else self._outside + 1
+        return self._outside < p.reengage_steps
 
     def _predicted(self, motion: np.ndarray | None) -> np.ndarray:
         """The previous (last accepted) estimate carried along the camera's motion since

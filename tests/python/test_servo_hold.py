@@ -25,13 +25,15 @@ def test_reengage_bounds_are_checked():
         ServoParams(reengage_translation=0.0004)
     with pytest.raises(ValueError, match=r"reengage_rotation must be >= rotation_tolerance"):
         ServoParams(reengage_rotation=math.radians(0.05))
+    with pytest.raises(ValueError, match=r"reengage_steps must be >= 1 step, got 0"):
+        ServoParams(reengage_steps=0)
     ServoParams(reengage_translation=0.0005, reengage_rotation=math.radians(0.1))  # no band
 
 
 def test_converged_servo_holds_inside_the_band_and_reengages_beyond(scene, desired):
     """Converged at the goal; a view 1.5 mm off (beyond the 0.5 mm tolerance, inside the
-    2 mm band) stays converged with a zero twist; 4 mm off re-engages. Without the band
-    (re-engage at the tolerances) the 1.5 mm view runs."""
+    2 mm band) stays converged with a zero twist; 4 mm off for three steps re-engages.
+    Without the band (re-engage at the tolerances, after one step) the 1.5 mm view runs."""
     goal = view(scene, desired)
     near = view(scene, camera_pose((0.0015, 0.0, 0.0)))
     far = view(scene, camera_pose((0.004, 0.0, 0.0)))
@@ -41,16 +43,25 @@ def test_converged_servo_holds_inside_the_band_and_reengages_beyond(scene, desir
     twist, status, record = servo.step_record(near, now=0.1)
     assert 1.0 < 1000 * record.translation_error < 2.0  # the estimate sees the offset
     assert status.state == "converged" and not np.any(twist)
-    twist, status, record = servo.step_record(far, now=0.2)
+    # Beyond the band it re-engages on the third view in a row (reengage_steps = 3); a
+    # view back inside the band in between starts the count again.
+    for now, expected in ((0.2, "converged"), (0.3, "converged"), (0.4, "converged")):
+        twist, status, record = servo.step_record(far if now != 0.3 else near, now=now)
+        assert status.state == expected and not np.any(twist)
     assert 1000 * record.translation_error > 2.0
+    assert servo.step(far, now=0.5)[1].state == "converged"
+    twist, status, record = servo.step_record(far, now=0.6)
     assert status.state == "running" and np.linalg.norm(twist[:3]) > 0.002
     # Re-engaged, it converges by the tolerances again, not by the band.
-    assert servo.step(near, now=0.3)[1].state == "running"
+    assert servo.step(near, now=0.7)[1].state == "running"
     servo.reset()  # forgets the convergence
-    assert servo.step(near, now=0.4)[1].state == "running"
+    assert servo.step(near, now=0.8)[1].state == "running"
 
     strict = SpectralServo(
-        goal, ServoParams(reengage_translation=0.0005, reengage_rotation=math.radians(0.1))
+        goal,
+        ServoParams(
+            reengage_translation=0.0005, reengage_rotation=math.radians(0.1), reengage_steps=1
+        ),
     )
     assert strict.step(goal, now=0.0)[1].state == "converged"
     assert strict.step(near, now=0.1)[1].state == "running"
