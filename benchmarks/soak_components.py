@@ -109,7 +109,9 @@ def main() -> int:
             if i == 100 or i % (args.steps // 5) == 0:
                 memory[i] = rss_mb()
         gc.collect()
-        python_kb = (tracemalloc.get_traced_memory()[0] - traced) / 1024 if traced else None
+        python_kb = None
+        if args.tracemalloc:
+            python_kb = (tracemalloc.get_traced_memory()[0] - traced) / 1024
         end = rss_mb()
         ctypes.CDLL("libc.so.6").malloc_trim(0)
         trimmed = rss_mb()
