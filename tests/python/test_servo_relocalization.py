@@ -127,14 +127,17 @@ def test_unconfirmed_relocalizations_back_off(large_start):
     # No global registration is taken (relocalize_score 1) and the view stays lost: the
     # spacing doubles after each unconfirmed attempt, from relocalize_retry up to
     # relocalize_interval (2, 4, 8, 10 steps), instead of a global registration every
-    # other step; relocalize_backoff 1 keeps it at relocalize_retry.
-    params = ServoParams(relocalize_score=1.0)
+    # other step; relocalize_backoff 1 keeps it at relocalize_retry. Without the recovery
+    # (recover_after 0), which would move the camera until the view is registered.
+    params = ServoParams(relocalize_score=1.0, recover_after=0)
     assert (params.relocalize_retry, params.relocalize_backoff) == (2, 2)
     log, _ = run(large_start, params, max_steps=25)
     assert all(r.confidence < params.relocalize_fitness for r in log.records)
     attempts = [r.step for r in log.records if not np.isnan(r.relocalization_score)]
     assert attempts == [0, 2, 6, 14, 24]
-    fixed, _ = run(large_start, ServoParams(relocalize_score=1.0, relocalize_backoff=1), 9)
+    fixed, _ = run(
+        large_start, ServoParams(relocalize_score=1.0, relocalize_backoff=1, recover_after=0), 9
+    )
     assert [r.step for r in fixed.records if not np.isnan(r.relocalization_score)] == [
         0,
         2,
