@@ -48,8 +48,8 @@ test-sanitize: system-deps venv
 
 # The C++ tests of threads (parallel alignments, one ModelAligner shared by two threads,
 # the same result with one and two threads, FFTW's and the SO(3) search's threads) under
-# ThreadSanitizer, in build/tsan (preset "tsan"; third-party suppressions only: docs/reliability.md). About 5 minutes of
-# build and 3 of tests on 2 cores (docs/reliability.md).
+# ThreadSanitizer, in build/tsan (preset "tsan"; third-party suppressions only). About 5
+# minutes of build and 3 of tests on 2 cores (docs/reliability.md).
 test-tsan: system-deps venv
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --preset tsan
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --build --preset tsan
