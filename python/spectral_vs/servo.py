@@ -1508,7 +1508,7 @@ class SpectralServo:
             record.status = ServoStatus(
                 "stopped",
                 "lost",
-                f"no relocalization reached relocalize_score {p.relocalize_score:g} within "
+                f"no relocalization reached recover_score {p.recover_score:g} within "
                 f"{p.recover_steps} recovery steps (last score "
                 f"{record.relocalization_score:.3f})",
             )

@@ -49,6 +49,17 @@ struct Prepared {
   Prepared(const Prepared&) = delete;
   Prepared& operator=(const Prepared&) = delete;
 
+  // What Algorithm 1 and the stages work with, on this scene.
+  Problem problem(ScoredModel& moving, const AlignParams& params, double margin,
+                  Clock::time_point deadline, std::optional<Eigen::Vector3d> flat_axis,
+                  bool dense_model) const {
+    return Problem{scene_map,   view ? &*view : nullptr,
+                   moving,      model_coefficients,
+                   params,      margin,
+                   deadline,    flat_axis,
+                   dense_model, viewpoint};
+  }
+
   const std::optional<SupportPlane> plane;
   const PointCloud searched;
   const SceneMap scene_map;
@@ -64,17 +75,8 @@ struct Prepared {
 AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
                              const AlignParams& params, ScoredModel& moving, Prepared& prepared,
                              Clock::time_point deadline) {
-  const RangeImage* view_ptr = prepared.view ? &*prepared.view : nullptr;
-  const Problem problem{prepared.scene_map,
-                        view_ptr,
-                        moving,
-                        prepared.model_coefficients,
-                        params,
-                        window_margin(0.0, params),
-                        deadline,
-                        std::nullopt,
-                        true,
-                        prepared.viewpoint};
+  const Problem problem =
+      prepared.problem(moving, params, window_margin(0.0, params), deadline, std::nullopt, true);
   const Pose start = moving.pose_of(params.initial_guess);
   SceneTranslation whole_scene =
       params.max_translation > 0.0
@@ -100,8 +102,8 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
 
 // The second stage: hypotheses per part of the scene that could be the object, or over
 // the whole scene when it has no parts.
-std::vector<Hypothesis> hypotheses_of(const Problem& problem, const Prepared& prepared,
-                                      So3Correlation& correlation, double search_voxel,
+std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared,
+                                      double search_voxel,
                                       std::optional<TranslationWindow>& window) {
   const AlignParams& params = problem.params;
   std::vector<std::vector<Eigen::Index>> parts;
@@ -114,7 +116,8 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, const Prepared& pr
   }
   std::vector<Hypothesis> hypotheses;
   if (parts.empty() && !(prepared.plane && params.guess_distance > 0.0)) {
-    hypotheses = global_hypotheses(problem, correlation, prepared.scene_coefficients, search_voxel);
+    hypotheses =
+        global_hypotheses(problem, prepared.correlation, prepared.scene_coefficients, search_voxel);
     seed_with_guess(problem, hypotheses, search_voxel);
   } else {
     const int per_part = prepared.plane ? std::max(1, params.hypotheses / 2) : params.hypotheses;
@@ -181,20 +184,10 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
   const std::optional<Eigen::Vector3d> axis =
       flat_axis(prepared.model_coefficients, params.bandwidth);
   const bool dense = dense_for_polish(model.points(), params.voxel_size);
-  const RangeImage* view_ptr = prepared.view ? &*prepared.view : nullptr;
-  const Problem problem{prepared.scene_map,
-                        view_ptr,
-                        moving,
-                        prepared.model_coefficients,
-                        params,
-                        window_margin(search_voxel, params),
-                        deadline,
-                        axis,
-                        dense,
-                        prepared.viewpoint};
+  const Problem problem =
+      prepared.problem(moving, params, window_margin(search_voxel, params), deadline, axis, dense);
   std::optional<TranslationWindow> window;
-  const std::vector<Hypothesis> hypotheses =
-      hypotheses_of(problem, prepared, prepared.correlation, search_voxel, window);
+  const std::vector<Hypothesis> hypotheses = hypotheses_of(problem, prepared, search_voxel, window);
   AlignResult best =
       refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), window);
   best.search_voxel_size = search_voxel;
