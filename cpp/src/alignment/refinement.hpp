@@ -31,7 +31,7 @@ class SceneThenWindow : public TranslationSource {
   void follow(const Eigen::Vector3d& centre, const Eigen::Vector3d& step, bool more) override {
     if (on_window_) {
       window_->follow(centre);
-    } else if (problem_.params.max_translation == 0.0 && more &&
+    } else if (problem_.params.local.max_translation == 0.0 && more &&
                step.norm() < 0.5 * problem_.margin) {
       place_window(problem_, window_, centre);  // near: go local
       on_window_ = true;
