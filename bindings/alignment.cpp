@@ -39,9 +39,6 @@ void define_align_groups(py::module_& m) {
 The scene and its representation: ``AlignParams.scene``, read by every stage of
 :func:`align` (the voxel is the unit of its lengths).
 
-Takes its fields as keyword arguments; each is also a field of :class:`AlignParams` under
-the same name.
-
 Attributes
 ----------
 voxel_size : float
@@ -120,9 +117,6 @@ suppress_support_plane : bool
 The local controller, Algorithm 1 (paper, eq. 16-17): ``AlignParams.local``, read by every
 run of Algorithm 1 (the paper's mode, the global search's refinements, ModelAligner).
 
-Takes its fields as keyword arguments; each is also a field of :class:`AlignParams` under
-the same name.
-
 Attributes
 ----------
 translation_gain, rotation_gain : float
@@ -164,9 +158,6 @@ The global search (beyond the paper): ``AlignParams.search``, read by the hypoth
 generation (the SO(3) search, the placement of its rotations) and the choice of the
 hypotheses refined.
 
-Takes its fields as keyword arguments; each is also a field of :class:`AlignParams` under
-the same name.
-
 Attributes
 ----------
 global_search : bool
@@ -205,9 +196,6 @@ guess_distance : float
 The refinement of the global search's hypotheses: ``AlignParams.refinement``, read after
 the search (not in the paper's mode).
 
-Takes its fields as keyword arguments; each is also a field of :class:`AlignParams` under
-the same name.
-
 Attributes
 ----------
 refinement_iterations : int
@@ -236,9 +224,6 @@ icp_refinement : bool
   py::class_<VerificationParams> verification(m, "VerificationParams", R"doc(
 The check of the result and its alternatives: ``AlignParams.verification``, read after the
 last refinement.
-
-Takes its fields as keyword arguments; each is also a field of :class:`AlignParams` under
-the same name.
 
 Attributes
 ----------

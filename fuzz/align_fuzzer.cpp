@@ -87,8 +87,8 @@ AlignParams random_params(FuzzedDataProvider& in) {
   p.scene.bandwidth = in.ConsumeIntegralInRange(2, 16);
   p.local.translation_gain = in.ConsumeFloatingPointInRange(0.05, 1.0);
   p.local.rotation_step = in.ConsumeBool() ? RotationStep::newton : RotationStep::gradient;
-  p.local.rotation_gain =
-      in.ConsumeFloatingPointInRange(0.05, p.local.rotation_step == RotationStep::newton ? 1.0 : 2.0);
+  p.local.rotation_gain = in.ConsumeFloatingPointInRange(
+      0.05, p.local.rotation_step == RotationStep::newton ? 1.0 : 2.0);
   p.local.max_rotation_step = in.ConsumeFloatingPointInRange(0.01, 1.0);
   p.local.tolerance = in.ConsumeFloatingPointInRange(1e-4, 0.2);
   p.local.max_iterations = in.ConsumeIntegralInRange(1, 30);
@@ -96,13 +96,14 @@ AlignParams random_params(FuzzedDataProvider& in) {
   p.search.global_search = in.ConsumeBool();
   p.search.hypotheses = in.ConsumeIntegralInRange(1, 12);
   p.search.refinements = in.ConsumeIntegralInRange(1, p.search.hypotheses);
-  if (in.ConsumeBool()) p.search.search_voxel_size = in.ConsumeFloatingPointInRange(p.scene.voxel_size, 0.05);
+  if (in.ConsumeBool())
+    p.search.search_voxel_size = in.ConsumeFloatingPointInRange(p.scene.voxel_size, 0.05);
   if (in.ConsumeBool()) p.search.window_margin = in.ConsumeFloatingPointInRange(0.001, 0.1);
   if (in.ConsumeBool()) p.local.max_translation = in.ConsumeFloatingPointInRange(0.001, 0.2);
   if (in.ConsumeBool()) {
     p.scene.scene_viewpoint = Eigen::Vector3d(in.ConsumeFloatingPointInRange(-1.0, 1.0),
-                                        in.ConsumeFloatingPointInRange(-1.0, 1.0),
-                                        in.ConsumeFloatingPointInRange(-1.0, 1.0));
+                                              in.ConsumeFloatingPointInRange(-1.0, 1.0),
+                                              in.ConsumeFloatingPointInRange(-1.0, 1.0));
   }
   p.scene.suppress_support_plane = in.ConsumeBool();
   p.refinement.polish = in.ConsumeBool();

@@ -711,10 +711,14 @@ std::vector<Case> cases() {
        [] { align(object(), object(), with([](AlignParams& p) { p.scene.bandwidth = 129; })); },
        "bandwidth"},
       {"align_gain",
-       [] { align(object(), object(), with([](AlignParams& p) { p.local.translation_gain = 2.0; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.local.translation_gain = 2.0; }));
+       },
        "translation_gain"},
       {"align_rotation_gain_inf",
-       [] { align(object(), object(), with([](AlignParams& p) { p.local.rotation_gain = kInf; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.local.rotation_gain = kInf; }));
+       },
        "rotation_gain"},
       {"align_iterations",
        [] { align(object(), object(), with([](AlignParams& p) { p.local.max_iterations = 0; })); },
@@ -723,10 +727,14 @@ std::vector<Case> cases() {
        [] { align(object(), object(), with([](AlignParams& p) { p.search.refinements = 9; })); },
        "refinements"},
       {"align_search_voxel",
-       [] { align(object(), object(), with([](AlignParams& p) { p.search.search_voxel_size = -1.0; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.search.search_voxel_size = -1.0; }));
+       },
        "search_voxel_size"},
       {"align_window_margin",
-       [] { align(object(), object(), with([](AlignParams& p) { p.search.window_margin = kNaN; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.search.window_margin = kNaN; }));
+       },
        "window_margin"},
       {"align_threads",
        [] { align(object(), object(), with([](AlignParams& p) { p.threads = 100000; })); },

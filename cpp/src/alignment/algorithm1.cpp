@@ -105,7 +105,8 @@ AxisRotationStep rotation_step_about(So3Correlation& correlation, const Eigen::M
   out.curvature = newton_law ? a.dot(c.hessian * a) : 0.0;
   // The law of detail::rotation_step, in one dimension.
   out.newton = newton_law && out.curvature < 0.0;
-  const double step = params.local.rotation_gain * (out.newton ? -out.slope / out.curvature : out.slope);
+  const double step =
+      params.local.rotation_gain * (out.newton ? -out.slope / out.curvature : out.slope);
   out.turn = detail::capped_step(step, params.local, &out.capped);
   return out;
 }

@@ -40,8 +40,10 @@ struct Prepared {
         searched(plane ? without_support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach())
                        : scene),
         scene_map(searched, scene, params.scene.voxel_size, params.limits),
-        model_coefficients(egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method)),
-        scene_coefficients(egi_coefficients(searched, params.scene.bandwidth, params.scene.egi_method)),
+        model_coefficients(
+            egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method)),
+        scene_coefficients(
+            egi_coefficients(searched, params.scene.bandwidth, params.scene.egi_method)),
         correlation(scene_coefficients, model_coefficients, params.scene.bandwidth, true),
         view(single_view_image(scene, params)),
         viewpoint(view ? std::optional<Eigen::Vector3d>(scene_sensor_origin(params))
@@ -80,9 +82,9 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
   const Pose start = moving.pose_of(params.initial_guess);
   SceneTranslation whole_scene =
       params.local.max_translation > 0.0
-          ? SceneTranslation(prepared.scene_map, box_of(moving.move(start)), params.local.max_translation,
-                             params.scene.voxel_size, params.scene.occupancy, phase_params(params),
-                             params.limits)
+          ? SceneTranslation(prepared.scene_map, box_of(moving.move(start)),
+                             params.local.max_translation, params.scene.voxel_size,
+                             params.scene.occupancy, phase_params(params), params.limits)
           : SceneTranslation(prepared.scene_map, moving.centre(start), moving.reach(),
                              params.scene.voxel_size, params.scene.occupancy, phase_params(params),
                              params.limits);
@@ -91,11 +93,10 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
   AlignResult result =
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
                               source, params.local.max_iterations);
-  // The servo reads only the fitness; the check (AlignParams::verify) is its to skip.
+  // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
   if (params.verification.verify) {
-    set_verification(
-        result,
-        Verifier(scene, params.scene.voxel_size, prepared.viewpoint).verify(model, result.T_scene_model));
+    set_verification(result, Verifier(scene, params.scene.voxel_size, prepared.viewpoint)
+                                 .verify(model, result.T_scene_model));
   }
   return result;
 }
@@ -108,8 +109,8 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
   const AlignParams& params = problem.params;
   std::vector<std::vector<Eigen::Index>> parts;
   if (prepared.plane) {
-    parts =
-        object_parts(prepared.searched, prepared.plane, problem.model.reach(), params.scene.voxel_size);
+    parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(),
+                         params.scene.voxel_size);
     keep_parts_near_guess(problem, prepared.searched, parts);
   } else if (prepared.view) {
     parts.push_back(whole_view(prepared.searched));
@@ -120,7 +121,8 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
         global_hypotheses(problem, prepared.correlation, prepared.scene_coefficients, search_voxel);
     seed_with_guess(problem, hypotheses, search_voxel);
   } else {
-    const int per_part = prepared.plane ? std::max(1, params.search.hypotheses / 2) : params.search.hypotheses;
+    const int per_part =
+        prepared.plane ? std::max(1, params.search.hypotheses / 2) : params.search.hypotheses;
     hypotheses = part_hypotheses(problem, parts, per_part, window);
     seed_with_guess(problem, hypotheses, params.scene.voxel_size);
     turn_about_flat_axis(problem, hypotheses, params.scene.voxel_size);
@@ -160,7 +162,8 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
     // result is swept and refined before they are compared.
     if (params.refinement.polish && problem.flat_axis)
       sweep_result_about(problem, window, result, *problem.flat_axis);
-    if (params.refinement.icp_refinement && prepared.view) refine_with_icp(problem, model, scene, result);
+    if (params.refinement.icp_refinement && prepared.view)
+      refine_with_icp(problem, model, scene, result);
     out_of_time = result.stop_reason == AlignStopReason::max_seconds || expired(problem);
     if (i == 0 || better(result, best)) best = std::move(result);
   }
@@ -171,7 +174,8 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
     return best;
   }
   // Without the ICP, which reaches past it at a fraction of its cost.
-  if (params.refinement.polish && !params.refinement.icp_refinement) polish_result_rotation(problem, window, best);
+  if (params.refinement.polish && !params.refinement.icp_refinement)
+    polish_result_rotation(problem, window, best);
   if (params.refinement.icp_refinement) refine_with_icp(problem, model, scene, best);
   return best;
 }

@@ -226,19 +226,20 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     return a.verification.inliers > b.verification.inliers;
   });
   candidates.resize(std::min<std::size_t>(
-      candidates.size(), std::size_t(kRefinedPerAlternative * params.verification.max_alternatives)));
+      candidates.size(),
+      std::size_t(kRefinedPerAlternative * params.verification.max_alternatives)));
   const double sparse_confidence = sparse_returned.confidence;
   std::vector<Candidate> screened;
   for (const Candidate& candidate : candidates) {
-    if (passes_screening(sparse, verifier, candidate, T, c, sparse_confidence, params.scene.voxel_size,
-                         viewpoint))
+    if (passes_screening(sparse, verifier, candidate, T, c, sparse_confidence,
+                         params.scene.voxel_size, viewpoint))
       screened.push_back(candidate);
   }
   candidates = std::move(screened);
   for (Candidate& candidate : candidates) {
     if (candidate.turn) {
-      candidate.T = refine_translation(model, verifier.fine_grid(), candidate.T, params.scene.voxel_size,
-                                       viewpoint);
+      candidate.T = refine_translation(model, verifier.fine_grid(), candidate.T,
+                                       params.scene.voxel_size, viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
       continue;
     }

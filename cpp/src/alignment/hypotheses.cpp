@@ -109,8 +109,8 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       coarse->place(centroid);
     } else {
       coarse.emplace(problem.scene, problem.model.reach(), problem.margin, centroid,
-                     kCoarsePlacement * params.scene.voxel_size, params.scene.occupancy, phase_params(params),
-                     params.limits);
+                     kCoarsePlacement * params.scene.voxel_size, params.scene.occupancy,
+                     phase_params(params), params.limits);
     }
     for (const RotationCandidate& candidate :
          so3_search(coefficients, problem.model_coefficients, params.scene.bandwidth, search)) {
@@ -125,8 +125,8 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       // Twice: the coarse shift brings the model near enough for the fine one to be exact.
       hypothesis.pose.offset += coarse->estimate(problem.model.move(hypothesis.pose)).shift;
       hypothesis.pose.offset += window->estimate(problem.model.move(hypothesis.pose)).shift;
-      hypothesis.fitness =
-          problem.model.fitness(problem.scene, problem.view, hypothesis.pose, params.scene.voxel_size);
+      hypothesis.fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
+                                                 params.scene.voxel_size);
       hypotheses.push_back(hypothesis);
     }
   }

@@ -88,9 +88,9 @@ struct ModelAligner::Impl {
     // Only the scene points a bounded shift can reach enter the grid (as in align()).
     const Points in_reach =
         detail::points_in_reach(scene.points(), model_box, params.local.max_translation);
-    const GridSpec spec =
-        detail::bounded_translation_spec(detail::points_box(in_reach), model_box,
-                                         params.local.max_translation, params.scene.voxel_size, params.limits);
+    const GridSpec spec = detail::bounded_translation_spec(detail::points_box(in_reach), model_box,
+                                                           params.local.max_translation,
+                                                           params.scene.voxel_size, params.limits);
     use_plans(spec);
     voxelize_into(in_reach, spec, params.scene.occupancy, target, params.limits);
     phase->set_target(target);
@@ -144,7 +144,8 @@ struct ModelAligner::Impl {
     auto t = Clock::now();
     const ShCoefficients scene_coefficients =
         egi_coefficients(scene, params.scene.bandwidth, params.scene.egi_method);
-    So3Correlation correlation(scene_coefficients, model_coefficients, params.scene.bandwidth, true);
+    So3Correlation correlation(scene_coefficients, model_coefficients, params.scene.bandwidth,
+                               true);
     timings.scene_coefficients = seconds_since(t);
     t = Clock::now();
     const GridSpec map = detail::FitnessMap::spec_of(scene, params.scene.voxel_size, params.limits);
@@ -170,9 +171,9 @@ struct ModelAligner::Impl {
     t = Clock::now();
     result.fitness = fitness(scene, map, pose);
     if (params.verification.verify) {
-      detail::set_verification(
-          result, detail::Verifier(scene, params.scene.voxel_size, detail::declared_viewpoint(params))
-                      .verify(model, result.T_scene_model));
+      detail::set_verification(result, detail::Verifier(scene, params.scene.voxel_size,
+                                                        detail::declared_viewpoint(params))
+                                           .verify(model, result.T_scene_model));
     }
     timings.fitness = seconds_since(t);
     return result;
@@ -187,15 +188,16 @@ ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
   Impl& im = *impl_;
   im.model = model;
   im.params = params;
-  if (params.scene.voxel_size == 0.0) im.params.scene.voxel_size = alignment_voxel_size(model, model);
+  if (params.scene.voxel_size == 0.0)
+    im.params.scene.voxel_size = alignment_voxel_size(model, model);
   // A tracker checks a view only when it is declared: 'automatic' is all sides here.
   if (params.scene.scene_view == SceneView::automatic && !detail::declared_viewpoint(params))
     im.params.scene.scene_view = SceneView::all_sides;
   im.moving_model.emplace(model);
   im.model_coefficients = egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method);
   if (im.local()) {
-    im.max_shift = Eigen::Vector3i::Constant(
-        detail::voxels_along(params.local.max_translation, im.params.scene.voxel_size, params.limits));
+    im.max_shift = Eigen::Vector3i::Constant(detail::voxels_along(
+        params.local.max_translation, im.params.scene.voxel_size, params.limits));
   }
 }
 

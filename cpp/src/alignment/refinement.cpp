@@ -19,7 +19,7 @@ constexpr double kPolishLastStep = 0.25 * M_PI / 180.0;
 constexpr int kPolishFirstStepRounds = 5;  // at most 20 degrees walked at the first step
 constexpr double kPolishMinDensity = 2.0;  // model points per occupied voxel
 
-// The ICP refinement of a result (AlignParams::icp_refinement), against the whole scene;
+// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole scene;
 // kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
 constexpr double kIcpFitnessLoss = 0.05;
 // Pairs within a voxel first (the spectral result may be most of one off), then, for a
@@ -146,7 +146,8 @@ template <typename Step>
 void polish_result(const Problem& problem, std::optional<TranslationWindow>& window,
                    AlignResult& result, Step step) {
   const Pose start = problem.model.pose_of(result.T_scene_model);
-  if (points_per_voxel(problem.model.move(start), problem.params.scene.voxel_size) < kPolishMinDensity)
+  if (points_per_voxel(problem.model.move(start), problem.params.scene.voxel_size) <
+      kPolishMinDensity)
     return;
   place_window(problem, window, problem.model.centre(start));
   const Pose polished = step(*window, start, result.polish_evaluations);
@@ -164,8 +165,8 @@ void place_window(const Problem& problem, std::optional<TranslationWindow>& wind
     return;
   }
   window.emplace(problem.scene, problem.model.reach(), problem.margin, centre,
-                 problem.params.scene.voxel_size, problem.params.scene.occupancy, phase_params(problem.params),
-                 problem.params.limits);
+                 problem.params.scene.voxel_size, problem.params.scene.occupancy,
+                 phase_params(problem.params), problem.params.limits);
 }
 
 AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& correlation,
@@ -189,7 +190,8 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   std::optional<So3Correlation> local_correlation;
   if (local) {
     try {
-      local_correlation.emplace(*local, problem.model_coefficients, problem.params.scene.bandwidth, true);
+      local_correlation.emplace(*local, problem.model_coefficients, problem.params.scene.bandwidth,
+                                true);
     } catch (const std::invalid_argument&) {
       // A window whose normals have no structure (a uniform EGI): keep the scene's.
     }
@@ -197,8 +199,9 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
   const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
   place_window(problem, window, problem.model.centre(hypothesis.pose));
-  AlignResult result = algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose,
-                                               *window, problem.params.refinement.refinement_iterations);
+  AlignResult result =
+      algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose, *window,
+                              problem.params.refinement.refinement_iterations);
   result.hypothesis = hypothesis.index;
   // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
   // walk off a right hypothesis: the fitter of the two poses is kept.
@@ -252,8 +255,9 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
     iterations += outcome.iterations;
   }
   if (iterations == 0) return;
-  const double fitness = problem.model.fitness(
-      problem.scene, problem.view, problem.model.pose_of(T_scene_model), problem.params.scene.voxel_size);
+  const double fitness =
+      problem.model.fitness(problem.scene, problem.view, problem.model.pose_of(T_scene_model),
+                            problem.params.scene.voxel_size);
   if (fitness < result.fitness - kIcpFitnessLoss) return;
   result.T_scene_model = T_scene_model;
   result.fitness = fitness;

@@ -72,7 +72,7 @@ void sweep_result_about(const Problem& problem, std::optional<TranslationWindow>
 void polish_result_rotation(const Problem& problem, std::optional<TranslationWindow>& window,
                             AlignResult& result);
 
-/// The ICP refinement of a result (AlignParams::icp_refinement), against the whole
+/// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole
 /// scene; kept unless it loses fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result);

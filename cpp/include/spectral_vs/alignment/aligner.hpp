@@ -77,15 +77,15 @@ struct LocalParams {
   double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
   double tolerance = 0.02;          ///< eps_g of eq. (17): stop when |translation step| in voxels
                                     ///< plus |grad C| (normalised correlation per radian) < eps_g.
-  int max_iterations = 100;  ///< Iterations of Algorithm 1, >= 1, without global search (the
-                             ///< paper's mode; the global search's: refinement_iterations).
-  bool subvoxel = true;      ///< Sub-voxel refinement of the phase-correlation peak.
-  double max_translation = 0.0;  ///< Without global search: the largest translation from the
-                                 ///< initial guess that is sought, metres, per axis. The grid
-                                 ///< then holds the scene and the model's start grown by this
-                                 ///< (not by the model's reach), all iterations run on it, and
-                                 ///< farther phase-correlation peaks are ignored: for two views
-                                 ///< of one scene, as in servoing. 0: unbounded (the paper).
+  int max_iterations = 100;         ///< Iterations of Algorithm 1, >= 1, without global search (the
+                                    ///< paper's mode; the global search's: refinement_iterations).
+  bool subvoxel = true;             ///< Sub-voxel refinement of the phase-correlation peak.
+  double max_translation = 0.0;     ///< Without global search: the largest translation from the
+                                    ///< initial guess that is sought, metres, per axis. The grid
+                                    ///< then holds the scene and the model's start grown by this
+                                    ///< (not by the model's reach), all iterations run on it, and
+                                    ///< farther phase-correlation peaks are ignored: for two views
+                                    ///< of one scene, as in servoing. 0: unbounded (the paper).
 };
 
 /// The global search (`AlignParams::search`; beyond the paper): the SO(3) search, the
