@@ -4,7 +4,9 @@ changes no result.
 Runs ``align`` in its two modes (the global search with the scan's viewpoint, and the
 paper's gradient ascent) and the servo's prepared reference (``ModelAligner`` with a
 bounded translation) on seeded cases of every family of ``benchmarks/cases.py``, and
-writes each returned ``T_scene_model`` as the hexadecimal form of its 16 doubles::
+``align_views`` on seeded view pairs of the real scans (``spectral_vs.data.view_pairs``
+of ``../shared/data``, 320 x 240, searched and from a prior pose), and writes each
+returned pose as the hexadecimal form of its 16 doubles::
 
     python benchmarks/pose_fingerprint.py --output before.json      # on the old code
     python benchmarks/pose_fingerprint.py --compare before.json     # on the new code
@@ -22,12 +24,15 @@ from pathlib import Path
 import numpy as np
 
 import spectral_vs as svs
+from spectral_vs import data
 from spectral_vs._core import ModelAligner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import cases as case_lib
 
 ANGLES = (30.0, 120.0)
+#: The scans whose view pairs ``align_views`` registers.
+VIEW_SCANS = ("table", "room")
 
 
 def fingerprint(T: np.ndarray) -> list[str]:
@@ -55,13 +60,42 @@ def poses(cases_per_cell: int) -> dict[str, list[str]]:
     return out
 
 
+def view_poses(pairs_per_scan: int) -> dict[str, list[str]]:
+    """``align_views`` on seeded view pairs: the global search, and the refinement of a
+    prior pose (the true one) with a bounded budget of hypotheses."""
+    out: dict[str, list[str]] = {}
+    for scan in VIEW_SCANS:
+        pairs = data.view_pairs(data.scan_path(scan), pairs_per_scan, seed=0, downscale=2)
+        for index, pair in enumerate(pairs):
+            key = f"views/{scan}-{index}"
+            searched = svs.align_views(
+                pair.reference, pair.current, sensor_origin=pair.current_viewpoint
+            )
+            out[f"{key}/search"] = fingerprint(searched.T_current_reference)
+            prior = svs.align_views(
+                pair.reference,
+                pair.current,
+                sensor_origin=pair.current_viewpoint,
+                hypotheses=4,
+                refinements=2,
+                prior=pair.T_current_reference,
+            )
+            out[f"{key}/prior"] = fingerprint(prior.T_current_reference)
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases-per-cell", type=int, default=2)
+    parser.add_argument(
+        "--view-pairs", type=int, default=2, help="view pairs per scan for align_views (0: none)"
+    )
     parser.add_argument("--output", type=Path, help="write the fingerprints here")
     parser.add_argument("--compare", type=Path, help="compare with fingerprints written before")
     args = parser.parse_args()
     current = poses(args.cases_per_cell)
+    if args.view_pairs > 0:
+        current |= view_poses(args.view_pairs)
     if args.output:
         args.output.write_text(json.dumps(current, indent=1))
     print(f"{len(current)} poses")

@@ -34,14 +34,10 @@ void warn_scene_viewpoint() {
     throw py::error_already_set();
 }
 
-}  // namespace
-
-void define_alignment(py::module_& m) {
-  py::class_<AlignParams> align_params(m, "AlignParams", R"doc(
-Settings of :func:`align`; every field has the default measured best.
-
-Takes its fields as keyword arguments, ``AlignParams(voxel_size=0.005, threads=2)``; the
-repr shows every field.
+void define_align_groups(py::module_& m) {
+  py::class_<SceneParams> scene(m, "SceneParams", R"doc(
+The scene and its representation: ``AlignParams.scene``, read by every stage of
+:func:`align` (the voxel is the unit of its lengths).
 
 Attributes
 ----------
@@ -51,46 +47,10 @@ voxel_size : float
     0.2-0.3 m for a view of a room).
 bandwidth : int
     B: EGI harmonics of degree l < B are correlated (default 16).
-translation_gain, rotation_gain : float
-    lambda_t in (0, 1] and lambda_r of eq. (16). With Newton steps lambda_r is the share
-    of the Newton step in (0, 1]; with gradient steps, radians per unit gradient.
-rotation_step : str
-    'newton' (default) or 'gradient' (the paper's law).
-max_rotation_step : float
-    Largest rotation of one iteration, radians.
-tolerance : float
-    eps_g of eq. (17): |translation step| (voxels) + |grad C| below which it stops.
-max_iterations : int
-    Iterations of Algorithm 1 in the paper's mode (default 100).
-refinement_iterations : int
-    With global search: iterations of Algorithm 1 per refinement (default 20); each
-    refined pose is then polished and ICP-refined.
-max_seconds : float
-    Time budget of the whole alignment, seconds (default 0: none). Past it, the best pose
-    so far is returned with ``converged = False`` and ``stop_reason = 'max_seconds'``.
-initial_guess : ndarray (4, 4)
-    T_scene_model to start from. With global search it seeds the search: verified and
-    ranked with its hypotheses (and, with guess_angle_deg or guess_distance, always
-    refined, the search kept to that neighbourhood).
-global_search : bool
-    Start from the best rotations of the SO(3) search (default True).
-hypotheses : int
-    Rotations of the global search that are placed and verified (default 48); half as
-    many per part of a cluttered scene.
-refinements : int
-    The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
-    scene around it; the best final fitness is kept (default 3, at most hypotheses).
-search_voxel_size : float
-    Voxel of the global search's translation grid, metres; 0 (default): twice
-    voxel_size, coarser where needed to keep that grid under 2^19 voxels.
-window_margin : float
-    How far the model may move per window placement, metres; 0 (default): the larger of
-    5 voxels and 2.5 search voxels.
-max_translation : float
-    Without global search: the largest translation from the initial guess sought, metres
-    per axis; the grid then holds the scene and the model's start grown by this instead
-    of by the model's reach, and farther peaks are ignored (two views of one scene, as in
-    servoing). 0 (default): unbounded.
+occupancy : str
+    'trilinear' (default), 'binary' (the paper) or 'count'.
+egi_method : str
+    'projection' (default) or 'histogram' (the paper).
 sensor_origin : ndarray (3,)
     Where the scene's sensor was, scene coordinates, metres (default the origin: a depth
     camera's cloud in its own frame). Estimated normals point toward it.
@@ -105,99 +65,44 @@ scene_view : str
 scene_viewpoint : ndarray (3,) or None
     Deprecated alias: setting it sets sensor_origin and scene_view='single_view' (None:
     scene_view='auto'); reading it gives sensor_origin for a declared single view.
-guess_angle_deg : float
-    With global search: the largest rotation from initial_guess searched, degrees, in
-    [0, 180] (default 0: no limit).
-guess_distance : float
-    With global search: the largest distance of the model's centroid from where
-    initial_guess puts it, metres (default 0: no limit). With either limit the guess is
-    always refined and only hypotheses inside both are kept.
 suppress_support_plane : bool
     With global search: search the scene without its support plane (a plane wider than 4
     model reaches holding over a fifth of the points, e.g. a table; fitness still sees
     it), and where there is one, search each connected part of the scene above it that
     could be the object on its own EGI, its rotations placed from the model's side
-    facing scene_viewpoint by phase correlation in a window around the part, at twice
-    the voxel and then at the voxel (default True).
-polish : bool
-    With global search: for a model whose EGI has a flat axis (a mug's), each pose
-    Algorithm 1 ends at is turned to the best of the turns about that axis every 15
-    degrees, scored by the overlap of the model's voxels with the scene's, before the
-    poses are compared; without icp_refinement, then a pattern search on the kept
-    rotation (4 to 1/4 degree steps) for the same overlap (default True). Skipped for
-    models sampled sparser than 2 points per occupied voxel.
-icp_refinement : bool
-    With global search: a point-to-plane ICP (pairs within voxel_size whose normals agree
-    within 45 degrees, then, for a model of at least 2 points per occupied voxel, within
-    0.4 voxel_size; with scene_viewpoint the model's
-    points facing it only), kept
-    unless it lowers fitness by more than 0.05 (default True); with scene_viewpoint on
-    every Algorithm 1 result before they are compared, and last on the kept one. The one
-    step that is not spectral.
-subvoxel : bool
-    Sub-voxel refinement of the phase-correlation peak.
-occupancy : str
-    'trilinear' (default), 'binary' (the paper) or 'count'.
-egi_method : str
-    'projection' (default) or 'histogram' (the paper).
-threads : int
-    In [1, 256].
-max_voxels : int
-    Memory cap: any grid over this many voxels is refused with ``ValueError`` before it
-    is allocated (default 2^27; the largest grids take about 28 bytes per voxel).
-max_alternatives : int
-    With global search: at most this many alternatives reported (``AlignResult.alternatives``),
-    in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
-verify : bool
-    Without global search: verify the final pose (``AlignResult.confidence``, ``inliers``,
-    ``inlier_rmse``, ``inlier_distance``; default True). False leaves those 0, with the same
-    pose, fitness and history bit for bit (a tracker that reads only the fitness). With
-    global search the poses are always verified.
+    facing the sensor of a single view by phase correlation in a window around the part,
+    at twice the voxel and then at the voxel (default True).
 )doc");
-  align_params.attr("_deprecated_aliases") = py::make_tuple("scene_viewpoint");
-  define_settings(align_params)
-      .def_readwrite("voxel_size", &AlignParams::voxel_size)
-      .def_readwrite("bandwidth", &AlignParams::bandwidth)
-      .def_readwrite("translation_gain", &AlignParams::translation_gain)
-      .def_readwrite("rotation_gain", &AlignParams::rotation_gain)
+  scene.attr("_deprecated_aliases") = py::make_tuple("scene_viewpoint");
+  define_settings(scene)
+      .def_readwrite("voxel_size", &SceneParams::voxel_size)
+      .def_readwrite("bandwidth", &SceneParams::bandwidth)
       .def_property(
-          "rotation_step",
-          [](const AlignParams& p) { return choice_name(p.rotation_step, kRotationSteps); },
-          [](AlignParams& p, const std::string& s) {
-            p.rotation_step = parse_choice(s, kRotationSteps, "rotation_step");
+          "occupancy", [](const SceneParams& p) { return choice_name(p.occupancy, kOccupancies); },
+          [](SceneParams& p, const std::string& s) {
+            p.occupancy = parse_choice(s, kOccupancies, "occupancy");
           })
-      .def_readwrite("max_rotation_step", &AlignParams::max_rotation_step)
-      .def_readwrite("tolerance", &AlignParams::tolerance)
-      .def_readwrite("max_iterations", &AlignParams::max_iterations)
-      .def_readwrite("refinement_iterations", &AlignParams::refinement_iterations)
-      .def_readwrite("max_seconds", &AlignParams::max_seconds)
       .def_property(
-          "initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },
-          [](AlignParams& p, const py::handle& T) {
-            p.initial_guess = to_transform(T, "initial_guess");
+          "egi_method", [](const SceneParams& p) { return choice_name(p.egi_method, kEgiMethods); },
+          [](SceneParams& p, const std::string& s) {
+            p.egi_method = parse_choice(s, kEgiMethods, "egi_method");
           })
-      .def_readwrite("global_search", &AlignParams::global_search)
-      .def_readwrite("hypotheses", &AlignParams::hypotheses)
-      .def_readwrite("refinements", &AlignParams::refinements)
-      .def_readwrite("search_voxel_size", &AlignParams::search_voxel_size)
-      .def_readwrite("window_margin", &AlignParams::window_margin)
-      .def_readwrite("max_translation", &AlignParams::max_translation)
       .def_property(
-          "sensor_origin", [](const AlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
-          [](AlignParams& p, const Eigen::Vector3d& origin) { p.sensor_origin = origin; })
+          "sensor_origin", [](const SceneParams& p) { return Eigen::Vector3d(p.sensor_origin); },
+          [](SceneParams& p, const Eigen::Vector3d& origin) { p.sensor_origin = origin; })
       .def_property(
-          "scene_view", [](const AlignParams& p) { return choice_name(p.scene_view, kSceneViews); },
-          [](AlignParams& p, const std::string& s) {
+          "scene_view", [](const SceneParams& p) { return choice_name(p.scene_view, kSceneViews); },
+          [](SceneParams& p, const std::string& s) {
             p.scene_view = parse_choice(s, kSceneViews, "scene_view");
           })
       .def_property(
           "scene_viewpoint",
-          [](const AlignParams& p) -> std::optional<Eigen::Vector3d> {
+          [](const SceneParams& p) -> std::optional<Eigen::Vector3d> {
             warn_scene_viewpoint();
             if (p.scene_view != SceneView::single_view) return std::nullopt;
             return p.sensor_origin;
           },
-          [](AlignParams& p, const std::optional<Eigen::Vector3d>& origin) {
+          [](SceneParams& p, const std::optional<Eigen::Vector3d>& origin) {
             warn_scene_viewpoint();
             if (origin) {
               p.sensor_origin = *origin;
@@ -206,28 +111,194 @@ verify : bool
               p.scene_view = SceneView::automatic;
             }
           })
-      .def_readwrite("guess_angle_deg", &AlignParams::guess_angle_deg)
-      .def_readwrite("guess_distance", &AlignParams::guess_distance)
-      .def_readwrite("suppress_support_plane", &AlignParams::suppress_support_plane)
-      .def_readwrite("polish", &AlignParams::polish)
-      .def_readwrite("icp_refinement", &AlignParams::icp_refinement)
-      .def_readwrite("subvoxel", &AlignParams::subvoxel)
+      .def_readwrite("suppress_support_plane", &SceneParams::suppress_support_plane);
+
+  py::class_<LocalParams> local(m, "LocalParams", R"doc(
+The local controller, Algorithm 1 (paper, eq. 16-17): ``AlignParams.local``, read by every
+run of Algorithm 1 (the paper's mode, the global search's refinements, ModelAligner).
+
+Attributes
+----------
+translation_gain, rotation_gain : float
+    lambda_t in (0, 1] and lambda_r of eq. (16). With Newton steps lambda_r is the share
+    of the Newton step in (0, 1]; with gradient steps, radians per unit gradient.
+rotation_step : str
+    'newton' (default) or 'gradient' (the paper's law).
+max_rotation_step : float
+    Largest rotation of one iteration, radians.
+tolerance : float
+    eps_g of eq. (17): |translation step| (voxels) + |grad C| below which it stops.
+max_iterations : int
+    Iterations of Algorithm 1 in the paper's mode (default 100).
+subvoxel : bool
+    Sub-voxel refinement of the phase-correlation peak.
+max_translation : float
+    Without global search: the largest translation from the initial guess sought, metres
+    per axis; the grid then holds the scene and the model's start grown by this instead
+    of by the model's reach, and farther peaks are ignored (two views of one scene, as in
+    servoing). 0 (default): unbounded.
+)doc");
+  define_settings(local)
+      .def_readwrite("translation_gain", &LocalParams::translation_gain)
+      .def_readwrite("rotation_gain", &LocalParams::rotation_gain)
       .def_property(
-          "occupancy", [](const AlignParams& p) { return choice_name(p.occupancy, kOccupancies); },
-          [](AlignParams& p, const std::string& s) {
-            p.occupancy = parse_choice(s, kOccupancies, "occupancy");
+          "rotation_step",
+          [](const LocalParams& p) { return choice_name(p.rotation_step, kRotationSteps); },
+          [](LocalParams& p, const std::string& s) {
+            p.rotation_step = parse_choice(s, kRotationSteps, "rotation_step");
           })
+      .def_readwrite("max_rotation_step", &LocalParams::max_rotation_step)
+      .def_readwrite("tolerance", &LocalParams::tolerance)
+      .def_readwrite("max_iterations", &LocalParams::max_iterations)
+      .def_readwrite("subvoxel", &LocalParams::subvoxel)
+      .def_readwrite("max_translation", &LocalParams::max_translation);
+
+  py::class_<GlobalSearchParams> search(m, "GlobalSearchParams", R"doc(
+The global search (beyond the paper): ``AlignParams.search``, read by the hypothesis
+generation (the SO(3) search, the placement of its rotations) and the choice of the
+hypotheses refined.
+
+Attributes
+----------
+global_search : bool
+    Start from the best rotations of the SO(3) search (default True); False: Algorithm 1
+    from initial_guess (the paper's mode), and the rest of this group is not read.
+hypotheses : int
+    Rotations of the global search that are placed and verified (default 48); half as
+    many per part of a cluttered scene.
+refinements : int
+    The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
+    scene around it; the best final fitness is kept (default 3, at most hypotheses).
+search_voxel_size : float
+    Voxel of the global search's translation grid, metres; 0 (default): twice
+    voxel_size, coarser where needed to keep that grid under 2^19 voxels.
+window_margin : float
+    How far the model may move per window placement, metres; 0 (default): the larger of
+    5 voxels and 2.5 search voxels.
+guess_angle_deg : float
+    The largest rotation from initial_guess searched, degrees, in [0, 180] (default 0:
+    no limit).
+guess_distance : float
+    The largest distance of the model's centroid from where initial_guess puts it,
+    metres (default 0: no limit). With either limit the guess is always refined and only
+    hypotheses inside both are kept.
+)doc");
+  define_settings(search)
+      .def_readwrite("global_search", &GlobalSearchParams::global_search)
+      .def_readwrite("hypotheses", &GlobalSearchParams::hypotheses)
+      .def_readwrite("refinements", &GlobalSearchParams::refinements)
+      .def_readwrite("search_voxel_size", &GlobalSearchParams::search_voxel_size)
+      .def_readwrite("window_margin", &GlobalSearchParams::window_margin)
+      .def_readwrite("guess_angle_deg", &GlobalSearchParams::guess_angle_deg)
+      .def_readwrite("guess_distance", &GlobalSearchParams::guess_distance);
+
+  py::class_<RefinementParams> refinement(m, "RefinementParams", R"doc(
+The refinement of the global search's hypotheses: ``AlignParams.refinement``, read after
+the search (not in the paper's mode).
+
+Attributes
+----------
+refinement_iterations : int
+    Iterations of Algorithm 1 per refinement (default 20); each refined pose is then
+    polished and ICP-refined.
+polish : bool
+    For a model whose EGI has a flat axis (a mug's), each pose Algorithm 1 ends at is
+    turned to the best of the turns about that axis every 15 degrees, scored by the
+    overlap of the model's voxels with the scene's, before the poses are compared;
+    without icp_refinement, then a pattern search on the kept rotation (4 to 1/4 degree
+    steps) for the same overlap (default True). Skipped for models sampled sparser than
+    2 points per occupied voxel.
+icp_refinement : bool
+    A point-to-plane ICP (pairs within voxel_size whose normals agree within 45 degrees,
+    then, for a model of at least 2 points per occupied voxel, within 0.4 voxel_size; for
+    a single view the model's points facing its sensor only), kept unless it lowers
+    fitness by more than 0.05 (default True); for a single view on every Algorithm 1
+    result before they are compared, and last on the kept one. The one step that is not
+    spectral.
+)doc");
+  define_settings(refinement)
+      .def_readwrite("refinement_iterations", &RefinementParams::refinement_iterations)
+      .def_readwrite("polish", &RefinementParams::polish)
+      .def_readwrite("icp_refinement", &RefinementParams::icp_refinement);
+
+  py::class_<VerificationParams> verification(m, "VerificationParams", R"doc(
+The check of the result and its alternatives: ``AlignParams.verification``, read after the
+last refinement.
+
+Attributes
+----------
+verify : bool
+    Without global search: verify the final pose (``AlignResult.confidence``, ``inliers``,
+    ``inlier_rmse``, ``inlier_distance``; default True). False leaves those 0, with the same
+    pose, fitness and history bit for bit (a tracker that reads only the fitness). With
+    global search the poses are always verified.
+max_alternatives : int
+    With global search: at most this many alternatives reported (``AlignResult.alternatives``),
+    in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
+)doc");
+  define_settings(verification)
+      .def_readwrite("verify", &VerificationParams::verify)
+      .def_readwrite("max_alternatives", &VerificationParams::max_alternatives);
+}
+
+void define_align_params(py::module_& m) {
+  define_align_groups(m);
+  py::class_<AlignParams> align_params(m, "AlignParams", R"doc(
+Settings of :func:`align`, grouped by the stage they steer; every field has the default
+measured best.
+
+The groups are attributes, each a settings object of its own: ``scene``
+(:class:`SceneParams`), ``local`` (Algorithm 1, :class:`LocalParams`), ``search`` (the
+global search, :class:`GlobalSearchParams`), ``refinement`` (:class:`RefinementParams`)
+and ``verification`` (:class:`VerificationParams`); ``params.search.hypotheses = 8``
+changes ``params``. Every field of a group is also a field of AlignParams under the same
+name (``params.hypotheses``), and takes a keyword argument,
+``AlignParams(voxel_size=0.005, hypotheses=8, threads=2)``; the repr shows every field.
+
+Attributes
+----------
+scene, local, search, refinement, verification
+    The groups (read-only references; their fields are settable).
+initial_guess : ndarray (4, 4)
+    T_scene_model to start from. With global search it seeds the search: verified and
+    ranked with its hypotheses (and, with guess_angle_deg or guess_distance, always
+    refined, the search kept to that neighbourhood).
+threads : int
+    Threads for FFTW and the SO(3) search, in [1, 256].
+max_seconds : float
+    Time budget of the whole alignment, seconds (default 0: none). Past it, the best pose
+    so far is returned with ``converged = False`` and ``stop_reason = 'max_seconds'``.
+max_voxels : int
+    Memory cap: any grid over this many voxels is refused with ``ValueError`` before it
+    is allocated (default 2^27; the largest grids take about 28 bytes per voxel).
+)doc");
+  define_settings(align_params);
+  define_group(align_params, "scene", &AlignParams::scene,
+               "The scene and its representation (SceneParams).");
+  define_group(align_params, "local", &AlignParams::local, "Algorithm 1 (LocalParams).");
+  define_group(align_params, "search", &AlignParams::search,
+               "The global search (GlobalSearchParams).");
+  define_group(align_params, "refinement", &AlignParams::refinement,
+               "The refinement of the search's hypotheses (RefinementParams).");
+  define_group(align_params, "verification", &AlignParams::verification,
+               "The check of the result and its alternatives (VerificationParams).");
+  align_params
       .def_property(
-          "egi_method", [](const AlignParams& p) { return choice_name(p.egi_method, kEgiMethods); },
-          [](AlignParams& p, const std::string& s) {
-            p.egi_method = parse_choice(s, kEgiMethods, "egi_method");
+          "initial_guess", [](const AlignParams& p) { return Eigen::Matrix4d(p.initial_guess); },
+          [](AlignParams& p, const py::handle& T) {
+            p.initial_guess = to_transform(T, "initial_guess");
           })
       .def_readwrite("threads", &AlignParams::threads)
+      .def_readwrite("max_seconds", &AlignParams::max_seconds)
       .def_property(
           "max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
-          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; })
-      .def_readwrite("max_alternatives", &AlignParams::max_alternatives)
-      .def_readwrite("verify", &AlignParams::verify);
+          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; });
+}
+
+}  // namespace
+
+void define_alignment(py::module_& m) {
+  define_align_params(m);
 
   py::class_<AlignIteration>(m, "AlignIteration", "One iteration of Algorithm 1, after its update.")
       .def_readonly("translation_cost", &AlignIteration::translation_cost,

@@ -80,8 +80,8 @@ params : AlignParams
       .def("__repr__", [](const ModelAligner& a) {
         std::ostringstream out;
         out << "ModelAligner(points=" << a.model().size()
-            << ", voxel_size=" << a.params().voxel_size << ", bandwidth=" << a.params().bandwidth
-            << ")";
+            << ", voxel_size=" << a.params().scene.voxel_size
+            << ", bandwidth=" << a.params().scene.bandwidth << ")";
         return out.str();
       });
 }

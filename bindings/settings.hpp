@@ -5,6 +5,9 @@
 // def_readwrite and def_property), found on the class when called, in the order they were
 // bound: a field added to the binding is in the constructor and the repr with no other line.
 // A deprecated alias (listed in the class's `_deprecated_aliases`) is a keyword only.
+// A nested group of settings (`define_group`: `params.search`, itself such a struct) is a
+// read-only property whose fields are also the outer struct's, under the same names: the
+// outer struct's keywords, repr and equality are those of its flat fields.
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -136,6 +139,38 @@ py::class_<Params, Options...>& define_settings(py::class_<Params, Options...>& 
   cls.def(
       "__deepcopy__", [](const Params& p, const py::dict&) { return Params(p); }, py::arg("memo"));
   return cls;
+}
+
+/// Binds the nested settings struct `member` of `cls` as the read-only property `name`
+/// (a reference: `params.search.hypotheses = 8` changes params), and each field of the
+/// group's bound class (`define_settings`, bound before) as a field of `cls` of the same
+/// name that reads and writes it there (`params.hypotheses = 8`). The group's deprecated
+/// aliases become `cls`'s too.
+template <typename Params, typename Group, typename... Options>
+void define_group(py::class_<Params, Options...>& cls, const char* name, Group Params::*member,
+                  const char* doc) {
+  cls.def_property_readonly(
+      name, [member](Params& p) -> Group& { return p.*member; },
+      py::return_value_policy::reference_internal, doc);
+  const py::handle group = py::type::of<Group>();
+  const std::string group_name = name;
+  for (const std::string& field : settings_detail::field_names(group, true)) {
+    const py::cpp_function get([group_name, field](const py::object& self) {
+      return py::object(self.attr(group_name.c_str()).attr(field.c_str()));
+    });
+    const py::cpp_function set([group_name, field](const py::object& self, const py::object& v) {
+      py::setattr(self.attr(group_name.c_str()), field.c_str(), v);
+    });
+    const std::string field_doc = "``" + group_name + "." + field + "``";
+    cls.def_property(field.c_str(), get, set, field_doc.c_str());
+  }
+  const std::vector<std::string> aliases = settings_detail::alias_names(group);
+  if (!aliases.empty()) {
+    py::list all;
+    for (const auto& alias : settings_detail::alias_names(cls)) all.append(alias);
+    for (const auto& alias : aliases) all.append(alias);
+    cls.attr("_deprecated_aliases") = py::tuple(all);
+  }
 }
 
 }  // namespace spectral_vs::python

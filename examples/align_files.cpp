@@ -79,14 +79,14 @@ bool parse_options(int argc, char** argv, Options& options) {
     const int values_left = argc - 1 - i;
     bool ok = true;
     if (arg == "--voxel-size" && values_left >= 1) {
-      ok = parse_double(argv[++i], options.params.voxel_size);
+      ok = parse_double(argv[++i], options.params.scene.voxel_size);
       options.voxel_given = true;
     } else if (arg == "--viewpoint" && values_left >= 3) {
       for (int k = 0; k < 3 && ok; ++k) ok = parse_double(argv[++i], options.viewpoint[k]);
     } else if (arg == "--local") {
-      options.params.global_search = false;
+      options.params.search.global_search = false;
     } else if (arg == "--max-iterations" && values_left >= 1) {
-      ok = parse_int(argv[++i], options.params.max_iterations);
+      ok = parse_int(argv[++i], options.params.local.max_iterations);
     } else if (arg == "--threads" && values_left >= 1) {
       ok = parse_int(argv[++i], options.params.threads);
     } else if (arg.rfind("-", 0) == 0) {
@@ -102,7 +102,7 @@ bool parse_options(int argc, char** argv, Options& options) {
   }
   // Checked here because the clouds are downsampled with it before `align` sees it.
   if (options.voxel_given &&
-      !(options.params.voxel_size > 0.0 && std::isfinite(options.params.voxel_size))) {
+      !(options.params.scene.voxel_size > 0.0 && std::isfinite(options.params.scene.voxel_size))) {
     std::fprintf(stderr, "align_files: --voxel-size must be a positive number of metres\n");
     return false;
   }
@@ -119,7 +119,7 @@ bool parse_options(int argc, char** argv, Options& options) {
 spectral_vs::PointCloud prepared(const spectral_vs::PointCloud& raw,
                                  const spectral_vs::CloudFileInfo& info, const std::string& path,
                                  const Options& options, const char* role) {
-  const double voxel_size = options.params.voxel_size;
+  const double voxel_size = options.params.scene.voxel_size;
   const spectral_vs::PointCloud downsampled = spectral_vs::voxel_downsample(raw, voxel_size / 2);
   std::printf("%s %s: %zu points (%zu non-finite dropped), %zu after downsampling to %.1f mm, ",
               role, path.c_str(), raw.size(), info.non_finite_dropped, downsampled.size(),
@@ -160,9 +160,9 @@ int main(int argc, char** argv) {
         spectral_vs::load_cloud(options.model_path, &model_info);
     const spectral_vs::PointCloud raw_scene =
         spectral_vs::load_cloud(options.scene_path, &scene_info);
-    options.params.sensor_origin = options.viewpoint;
+    options.params.scene.sensor_origin = options.viewpoint;
     if (!options.voxel_given)
-      options.params.voxel_size = spectral_vs::alignment_voxel_size(raw_model, raw_scene);
+      options.params.scene.voxel_size = spectral_vs::alignment_voxel_size(raw_model, raw_scene);
     const spectral_vs::PointCloud model =
         prepared(raw_model, model_info, options.model_path, options, "model");
     const spectral_vs::PointCloud scene =

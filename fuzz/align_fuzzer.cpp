@@ -83,34 +83,35 @@ Transform random_pose(FuzzedDataProvider& in) {
 
 AlignParams random_params(FuzzedDataProvider& in) {
   AlignParams p;
-  p.voxel_size = in.ConsumeFloatingPointInRange(0.004, 0.03);
-  p.bandwidth = in.ConsumeIntegralInRange(2, 16);
-  p.translation_gain = in.ConsumeFloatingPointInRange(0.05, 1.0);
-  p.rotation_step = in.ConsumeBool() ? RotationStep::newton : RotationStep::gradient;
-  p.rotation_gain =
-      in.ConsumeFloatingPointInRange(0.05, p.rotation_step == RotationStep::newton ? 1.0 : 2.0);
-  p.max_rotation_step = in.ConsumeFloatingPointInRange(0.01, 1.0);
-  p.tolerance = in.ConsumeFloatingPointInRange(1e-4, 0.2);
-  p.max_iterations = in.ConsumeIntegralInRange(1, 30);
-  p.refinement_iterations = in.ConsumeIntegralInRange(1, 20);
-  p.global_search = in.ConsumeBool();
-  p.hypotheses = in.ConsumeIntegralInRange(1, 12);
-  p.refinements = in.ConsumeIntegralInRange(1, p.hypotheses);
-  if (in.ConsumeBool()) p.search_voxel_size = in.ConsumeFloatingPointInRange(p.voxel_size, 0.05);
-  if (in.ConsumeBool()) p.window_margin = in.ConsumeFloatingPointInRange(0.001, 0.1);
-  if (in.ConsumeBool()) p.max_translation = in.ConsumeFloatingPointInRange(0.001, 0.2);
+  p.scene.voxel_size = in.ConsumeFloatingPointInRange(0.004, 0.03);
+  p.scene.bandwidth = in.ConsumeIntegralInRange(2, 16);
+  p.local.translation_gain = in.ConsumeFloatingPointInRange(0.05, 1.0);
+  p.local.rotation_step = in.ConsumeBool() ? RotationStep::newton : RotationStep::gradient;
+  p.local.rotation_gain = in.ConsumeFloatingPointInRange(
+      0.05, p.local.rotation_step == RotationStep::newton ? 1.0 : 2.0);
+  p.local.max_rotation_step = in.ConsumeFloatingPointInRange(0.01, 1.0);
+  p.local.tolerance = in.ConsumeFloatingPointInRange(1e-4, 0.2);
+  p.local.max_iterations = in.ConsumeIntegralInRange(1, 30);
+  p.refinement.refinement_iterations = in.ConsumeIntegralInRange(1, 20);
+  p.search.global_search = in.ConsumeBool();
+  p.search.hypotheses = in.ConsumeIntegralInRange(1, 12);
+  p.search.refinements = in.ConsumeIntegralInRange(1, p.search.hypotheses);
+  if (in.ConsumeBool())
+    p.search.search_voxel_size = in.ConsumeFloatingPointInRange(p.scene.voxel_size, 0.05);
+  if (in.ConsumeBool()) p.search.window_margin = in.ConsumeFloatingPointInRange(0.001, 0.1);
+  if (in.ConsumeBool()) p.local.max_translation = in.ConsumeFloatingPointInRange(0.001, 0.2);
   if (in.ConsumeBool()) {
-    p.scene_viewpoint = Eigen::Vector3d(in.ConsumeFloatingPointInRange(-1.0, 1.0),
-                                        in.ConsumeFloatingPointInRange(-1.0, 1.0),
-                                        in.ConsumeFloatingPointInRange(-1.0, 1.0));
+    p.scene.scene_viewpoint = Eigen::Vector3d(in.ConsumeFloatingPointInRange(-1.0, 1.0),
+                                              in.ConsumeFloatingPointInRange(-1.0, 1.0),
+                                              in.ConsumeFloatingPointInRange(-1.0, 1.0));
   }
-  p.suppress_support_plane = in.ConsumeBool();
-  p.polish = in.ConsumeBool();
-  p.icp_refinement = in.ConsumeBool();
-  p.subvoxel = in.ConsumeBool();
+  p.scene.suppress_support_plane = in.ConsumeBool();
+  p.refinement.polish = in.ConsumeBool();
+  p.refinement.icp_refinement = in.ConsumeBool();
+  p.local.subvoxel = in.ConsumeBool();
   const Occupancy occupancies[] = {Occupancy::binary, Occupancy::count, Occupancy::trilinear};
-  p.occupancy = occupancies[in.ConsumeIntegralInRange(0, 2)];
-  p.egi_method = in.ConsumeBool() ? EgiMethod::projection : EgiMethod::histogram;
+  p.scene.occupancy = occupancies[in.ConsumeIntegralInRange(0, 2)];
+  p.scene.egi_method = in.ConsumeBool() ? EgiMethod::projection : EgiMethod::histogram;
   p.threads = in.ConsumeIntegralInRange(1, 2);
   if (in.ConsumeBool()) p.initial_guess = random_pose(in);
   return p;

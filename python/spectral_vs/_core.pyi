@@ -344,71 +344,29 @@ def _rotation_timings(bandwidth: int, repeats: int) -> dict[str, float]: ...
 
 # --- Alignment (bindings/alignment.cpp) --------------------------------------
 
-class AlignParams:
-    """Settings of spectral_vs.align; fields as in the C++ struct, with its units."""
+class SceneParams:
+    """The scene and its representation (AlignParams.scene), with the C++ struct's units."""
 
     def __init__(
         self,
         *,
         voxel_size: float = ...,
         bandwidth: int = ...,
-        translation_gain: float = ...,
-        rotation_gain: float = ...,
-        rotation_step: str = ...,
-        max_rotation_step: float = ...,
-        tolerance: float = ...,
-        max_iterations: int = ...,
-        refinement_iterations: int = ...,
-        max_seconds: float = ...,
-        initial_guess: npt.ArrayLike = ...,
-        global_search: bool = ...,
-        hypotheses: int = ...,
-        refinements: int = ...,
-        search_voxel_size: float = ...,
-        window_margin: float = ...,
-        max_translation: float = ...,
+        occupancy: str = ...,
+        egi_method: str = ...,
         sensor_origin: npt.ArrayLike = ...,
         scene_view: str = ...,
         scene_viewpoint: npt.ArrayLike | None = ...,
-        guess_angle_deg: float = ...,
-        guess_distance: float = ...,
         suppress_support_plane: bool = ...,
-        polish: bool = ...,
-        icp_refinement: bool = ...,
-        subvoxel: bool = ...,
-        occupancy: str = ...,
-        egi_method: str = ...,
-        threads: int = ...,
-        max_voxels: int = ...,
-        max_alternatives: int = ...,
-        verify: bool = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
-    def __copy__(self) -> AlignParams: ...
-    def __deepcopy__(self, memo: dict[Any, Any]) -> AlignParams: ...
+    def __copy__(self) -> SceneParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> SceneParams: ...
     voxel_size: float  # metres, 0: derived from the model (alignment_voxel_size)
     bandwidth: int
-    translation_gain: float
-    rotation_gain: float
-    rotation_step: str  # "newton" or "gradient"
-    max_rotation_step: float  # radians
-    tolerance: float
-    max_iterations: int
-    refinement_iterations: int
-    max_seconds: float  # seconds, 0: no limit
-    @property
-    def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
-    @initial_guess.setter
-    def initial_guess(self, value: npt.ArrayLike) -> None: ...
-    guess_angle_deg: float  # degrees, 0: no limit
-    guess_distance: float  # metres, 0: no limit
-    global_search: bool
-    hypotheses: int
-    refinements: int
-    search_voxel_size: float  # metres, 0: automatic
-    window_margin: float  # metres, 0: automatic
-    max_translation: float  # metres, 0: unbounded
+    occupancy: str  # "trilinear", "binary" or "count"
+    egi_method: str  # "projection" or "histogram"
     @property
     def sensor_origin(self) -> _Array: ...  # (3,) metres
     @sensor_origin.setter
@@ -419,15 +377,192 @@ class AlignParams:
     @scene_viewpoint.setter
     def scene_viewpoint(self, value: npt.ArrayLike | None) -> None: ...
     suppress_support_plane: bool
+
+class LocalParams:
+    """Algorithm 1 (AlignParams.local), with the C++ struct's units."""
+
+    def __init__(
+        self,
+        *,
+        translation_gain: float = ...,
+        rotation_gain: float = ...,
+        rotation_step: str = ...,
+        max_rotation_step: float = ...,
+        tolerance: float = ...,
+        max_iterations: int = ...,
+        subvoxel: bool = ...,
+        max_translation: float = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
+    def __copy__(self) -> LocalParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> LocalParams: ...
+    translation_gain: float
+    rotation_gain: float
+    rotation_step: str  # "newton" or "gradient"
+    max_rotation_step: float  # radians
+    tolerance: float
+    max_iterations: int
+    subvoxel: bool
+    max_translation: float  # metres, 0: unbounded
+
+class GlobalSearchParams:
+    """The global search (AlignParams.search), with the C++ struct's units."""
+
+    def __init__(
+        self,
+        *,
+        global_search: bool = ...,
+        hypotheses: int = ...,
+        refinements: int = ...,
+        search_voxel_size: float = ...,
+        window_margin: float = ...,
+        guess_angle_deg: float = ...,
+        guess_distance: float = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
+    def __copy__(self) -> GlobalSearchParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> GlobalSearchParams: ...
+    global_search: bool
+    hypotheses: int
+    refinements: int
+    search_voxel_size: float  # metres, 0: automatic
+    window_margin: float  # metres, 0: automatic
+    guess_angle_deg: float  # degrees, 0: no limit
+    guess_distance: float  # metres, 0: no limit
+
+class RefinementParams:
+    """The refinement of the search's hypotheses (AlignParams.refinement)."""
+
+    def __init__(
+        self,
+        *,
+        refinement_iterations: int = ...,
+        polish: bool = ...,
+        icp_refinement: bool = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
+    def __copy__(self) -> RefinementParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> RefinementParams: ...
+    refinement_iterations: int
     polish: bool
     icp_refinement: bool
-    subvoxel: bool
+
+class VerificationParams:
+    """The check of the result and its alternatives (AlignParams.verification)."""
+
+    def __init__(
+        self,
+        *,
+        verify: bool = ...,
+        max_alternatives: int = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
+    def __copy__(self) -> VerificationParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> VerificationParams: ...
+    verify: bool  # without global search; False: confidence, inliers stay 0
+    max_alternatives: int
+
+class AlignParams:
+    """Settings of spectral_vs.align, grouped by stage (scene, local, search, refinement,
+    verification); every field of a group is also a field here under the same name."""
+
+    def __init__(
+        self,
+        *,
+        voxel_size: float = ...,
+        bandwidth: int = ...,
+        occupancy: str = ...,
+        egi_method: str = ...,
+        sensor_origin: npt.ArrayLike = ...,
+        scene_view: str = ...,
+        scene_viewpoint: npt.ArrayLike | None = ...,
+        suppress_support_plane: bool = ...,
+        translation_gain: float = ...,
+        rotation_gain: float = ...,
+        rotation_step: str = ...,
+        max_rotation_step: float = ...,
+        tolerance: float = ...,
+        max_iterations: int = ...,
+        subvoxel: bool = ...,
+        max_translation: float = ...,
+        global_search: bool = ...,
+        hypotheses: int = ...,
+        refinements: int = ...,
+        search_voxel_size: float = ...,
+        window_margin: float = ...,
+        guess_angle_deg: float = ...,
+        guess_distance: float = ...,
+        refinement_iterations: int = ...,
+        polish: bool = ...,
+        icp_refinement: bool = ...,
+        verify: bool = ...,
+        max_alternatives: int = ...,
+        initial_guess: npt.ArrayLike = ...,
+        threads: int = ...,
+        max_seconds: float = ...,
+        max_voxels: int = ...,
+    ) -> None: ...
+    def __eq__(self, other: object) -> bool: ...
+    __hash__: ClassVar[None]  # type: ignore[assignment]
+    def __copy__(self) -> AlignParams: ...
+    def __deepcopy__(self, memo: dict[Any, Any]) -> AlignParams: ...
+    @property
+    def scene(self) -> SceneParams: ...
+    @property
+    def local(self) -> LocalParams: ...
+    @property
+    def search(self) -> GlobalSearchParams: ...
+    @property
+    def refinement(self) -> RefinementParams: ...
+    @property
+    def verification(self) -> VerificationParams: ...
+    # The groups' fields, read and written in their group.
+    voxel_size: float  # metres, 0: derived from the model (alignment_voxel_size)
+    bandwidth: int
     occupancy: str  # "trilinear", "binary" or "count"
     egi_method: str  # "projection" or "histogram"
-    threads: int
-    max_voxels: int
-    max_alternatives: int
+    @property
+    def sensor_origin(self) -> _Array: ...  # (3,) metres
+    @sensor_origin.setter
+    def sensor_origin(self, value: npt.ArrayLike) -> None: ...
+    scene_view: str  # "auto", "single_view" or "all_sides"
+    @property
+    def scene_viewpoint(self) -> _Array | None: ...  # deprecated: sensor_origin, scene_view
+    @scene_viewpoint.setter
+    def scene_viewpoint(self, value: npt.ArrayLike | None) -> None: ...
+    suppress_support_plane: bool
+    translation_gain: float
+    rotation_gain: float
+    rotation_step: str  # "newton" or "gradient"
+    max_rotation_step: float  # radians
+    tolerance: float
+    max_iterations: int
+    subvoxel: bool
+    max_translation: float  # metres, 0: unbounded
+    global_search: bool
+    hypotheses: int
+    refinements: int
+    search_voxel_size: float  # metres, 0: automatic
+    window_margin: float  # metres, 0: automatic
+    guess_angle_deg: float  # degrees, 0: no limit
+    guess_distance: float  # metres, 0: no limit
+    refinement_iterations: int
+    polish: bool
+    icp_refinement: bool
     verify: bool  # without global search; False: confidence, inliers stay 0
+    max_alternatives: int
+    # The top-level fields.
+    @property
+    def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
+    @initial_guess.setter
+    def initial_guess(self, value: npt.ArrayLike) -> None: ...
+    threads: int
+    max_seconds: float  # seconds, 0: no limit
+    max_voxels: int
 
 class AlignIteration:
     """One iteration of Algorithm 1, after its update."""

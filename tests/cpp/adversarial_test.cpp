@@ -131,8 +131,8 @@ Kinematics arm() { return Kinematics(SPECTRAL_VS_TEST_URDF, "base_link", "tool")
 
 AlignParams fast() {
   AlignParams p;
-  p.hypotheses = 4;
-  p.refinements = 1;
+  p.search.hypotheses = 4;
+  p.search.refinements = 1;
   return p;
 }
 
@@ -702,31 +702,39 @@ std::vector<Case> cases() {
       {"align_no_normals", [] { align(PointCloud(object().points()), object()); },
        "model has no normals"},
       {"align_voxel_nan",
-       [] { align(object(), object(), with([](AlignParams& p) { p.voxel_size = kNaN; })); },
+       [] { align(object(), object(), with([](AlignParams& p) { p.scene.voxel_size = kNaN; })); },
        "voxel_size must be >= 0 metres"},
       {"align_voxel_negative",
-       [] { align(object(), object(), with([](AlignParams& p) { p.voxel_size = -0.01; })); },
+       [] { align(object(), object(), with([](AlignParams& p) { p.scene.voxel_size = -0.01; })); },
        "voxel_size must be >= 0 metres"},
       {"align_bandwidth",
-       [] { align(object(), object(), with([](AlignParams& p) { p.bandwidth = 129; })); },
+       [] { align(object(), object(), with([](AlignParams& p) { p.scene.bandwidth = 129; })); },
        "bandwidth"},
       {"align_gain",
-       [] { align(object(), object(), with([](AlignParams& p) { p.translation_gain = 2.0; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.local.translation_gain = 2.0; }));
+       },
        "translation_gain"},
       {"align_rotation_gain_inf",
-       [] { align(object(), object(), with([](AlignParams& p) { p.rotation_gain = kInf; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.local.rotation_gain = kInf; }));
+       },
        "rotation_gain"},
       {"align_iterations",
-       [] { align(object(), object(), with([](AlignParams& p) { p.max_iterations = 0; })); },
+       [] { align(object(), object(), with([](AlignParams& p) { p.local.max_iterations = 0; })); },
        "max_iterations"},
       {"align_refinements",
-       [] { align(object(), object(), with([](AlignParams& p) { p.refinements = 9; })); },
+       [] { align(object(), object(), with([](AlignParams& p) { p.search.refinements = 9; })); },
        "refinements"},
       {"align_search_voxel",
-       [] { align(object(), object(), with([](AlignParams& p) { p.search_voxel_size = -1.0; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.search.search_voxel_size = -1.0; }));
+       },
        "search_voxel_size"},
       {"align_window_margin",
-       [] { align(object(), object(), with([](AlignParams& p) { p.window_margin = kNaN; })); },
+       [] {
+         align(object(), object(), with([](AlignParams& p) { p.search.window_margin = kNaN; }));
+       },
        "window_margin"},
       {"align_threads",
        [] { align(object(), object(), with([](AlignParams& p) { p.threads = 100000; })); },
@@ -748,11 +756,11 @@ std::vector<Case> cases() {
       {"align_viewpoint_nan",
        [] {
          align(object(), object(),
-               with([](AlignParams& p) { p.scene_viewpoint = Eigen::Vector3d(kNaN, 0, 0); }));
+               with([](AlignParams& p) { p.scene.scene_viewpoint = Eigen::Vector3d(kNaN, 0, 0); }));
        },
        "scene_viewpoint must be finite"},
       {"align_tiny_voxel",
-       [] { align(object(), object(), with([](AlignParams& p) { p.voxel_size = 1e-5; })); },
+       [] { align(object(), object(), with([](AlignParams& p) { p.scene.voxel_size = 1e-5; })); },
        "max_voxels"},
       {"align_memory_limit",
        [] { align(object(), object(), with([](AlignParams& p) { p.limits.max_voxels = 1000; })); },
@@ -761,7 +769,7 @@ std::vector<Case> cases() {
        [] {
          const PointCloud far(rows({{-1e6, 0, 0}, {1e6, 0, 0}, {0, 0, 0}}),
                               rows({{0, 0, 1}, {0, 1, 0}, {1, 0, 0}}));
-         align(object(), far, with([](AlignParams& p) { p.voxel_size = 1e-4; }));
+         align(object(), far, with([](AlignParams& p) { p.scene.voxel_size = 1e-4; }));
        },
        "max_voxels"},
 
@@ -806,7 +814,7 @@ std::vector<Case> cases() {
          const AlignResult r =
              align(object(), object().transformed(pose(10, {1, 2, 3}, {0.01, 0, 0})),
                    with([](AlignParams& p) {
-                     p.global_search = false;
+                     p.search.global_search = false;
                      p.max_seconds = 1e-9;
                    }));
          expect_not_converged(r);
@@ -819,8 +827,8 @@ std::vector<Case> cases() {
          const AlignResult r =
              align(object(), object().transformed(pose(10, {1, 2, 3}, {0.01, 0, 0})),
                    with([](AlignParams& p) {
-                     p.global_search = false;
-                     p.max_iterations = 1;
+                     p.search.global_search = false;
+                     p.local.max_iterations = 1;
                    }));
          expect_not_converged(r);
          EXPECT_EQ(r.stop_reason, AlignStopReason::max_iterations);
@@ -831,7 +839,7 @@ std::vector<Case> cases() {
          const Transform far = test::translation({1e6, -1e6, 1e6});
          const Transform truth = pose(40, {1, -1, 2}, {0.03, 0.02, -0.01});
          const AlignResult r = align(object().transformed(far), object().transformed(far * truth),
-                                     with([](AlignParams& p) { p.hypotheses = 32; }));
+                                     with([](AlignParams& p) { p.search.hypotheses = 32; }));
          expect_finite(r);
          EXPECT_LT(rotation_error_deg(r.T_scene_model, far * truth * far.inverse()), 1.0);
        },
@@ -965,8 +973,8 @@ TEST(Threads, ParallelAlignmentsEqualSequentialOnes) {
   std::vector<Job> jobs;
   for (int i = 0; i < 4; ++i) {
     AlignParams p = fast();
-    p.bandwidth = i % 2 ? 9 : 7;
-    p.global_search = i != 3;
+    p.scene.bandwidth = i % 2 ? 9 : 7;
+    p.search.global_search = i != 3;
     p.threads = i == 1 ? 2 : 1;
     const Transform T =
         pose(i == 3 ? 12.0 : 50.0 + 40.0 * i, {1.0 + i, -1.0, 0.5}, {0.02 * i, 0.01, 0.0});

@@ -77,7 +77,7 @@ double translation_error_mm(const Transform& a, const Transform& b) {
 TEST(Align, PaperModeConvergesFromASmallRotation) {
   const Case c = make_case(12.0, 1);
   AlignParams params;
-  params.global_search = false;
+  params.search.global_search = false;
   const AlignResult result = align(c.model, c.scene, params);
   EXPECT_TRUE(result.converged);
   EXPECT_LT(rotation_error_degrees(result.T_scene_model, c.T_scene_model), 1.0);
@@ -96,9 +96,9 @@ TEST(Align, BoundedTranslationAgreesWithinItsBound) {
   // Offsets of up to 0.1 m per axis: a bound of 0.15 m changes the grid, not the answer.
   const Case c = make_case(8.0, 4);
   AlignParams params;
-  params.global_search = false;
+  params.search.global_search = false;
   const AlignResult unbounded = align(c.model, c.scene, params);
-  params.max_translation = 0.15;
+  params.local.max_translation = 0.15;
   const AlignResult bounded = align(c.model, c.scene, params);
   EXPECT_LT(rotation_error_degrees(bounded.T_scene_model, c.T_scene_model), 1.0);
   EXPECT_LT(translation_error_mm(bounded.T_scene_model, c.T_scene_model), 2.0);
@@ -113,12 +113,12 @@ TEST(Align, BoundedTranslationSeeksNoFartherThanItsBound) {
   const PointCloud model = box_with_ball(6000, rng);
   const PointCloud scene = model.transformed(test::translation(Eigen::Vector3d(0.12, 0.0, 0.0)));
   AlignParams params;
-  params.global_search = false;
-  params.max_iterations = 1;
-  params.translation_gain = 1.0;
+  params.search.global_search = false;
+  params.local.max_iterations = 1;
+  params.local.translation_gain = 1.0;
   const Eigen::Vector3d found = align(model, scene, params).T_scene_model.topRightCorner<3, 1>();
   EXPECT_NEAR(found.x(), 0.12, 0.002);
-  params.max_translation = 0.05;
+  params.local.max_translation = 0.05;
   const AlignResult result = align(model, scene, params);
   const Eigen::Vector3d bounded = result.T_scene_model.topRightCorner<3, 1>();
   EXPECT_LE(bounded.cwiseAbs().maxCoeff(), 0.05 + result.voxel_size);
@@ -129,16 +129,16 @@ TEST(Align, RefusesBadInput) {
   EXPECT_THROW(align(PointCloud(), c.scene), std::invalid_argument);
   EXPECT_THROW(align(c.model, PointCloud(c.scene.points())), std::invalid_argument);  // no normals
   AlignParams params;
-  params.bandwidth = 1;
+  params.scene.bandwidth = 1;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
-  params.tolerance = NAN;
+  params.local.tolerance = NAN;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
   params.initial_guess(3, 0) = 1.0;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
-  params.max_translation = -0.1;
+  params.local.max_translation = -0.1;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
   params.limits.max_voxels = 1000;
@@ -225,26 +225,26 @@ TEST(SingleView, AlignChecksADetectedViewAndOnlyThen) {
   std::mt19937 model_rng(24);
   const PointCloud model = box_with_ball(4000, model_rng);
   AlignParams params;
-  params.max_iterations = 5;
-  params.hypotheses = 4;
-  params.refinements = 1;
+  params.local.max_iterations = 5;
+  params.search.hypotheses = 4;
+  params.search.refinements = 1;
   EXPECT_TRUE(align(model, view, params).single_view);
   EXPECT_FALSE(align(model, box, params).single_view);
-  params.scene_view = SceneView::all_sides;
+  params.scene.scene_view = SceneView::all_sides;
   EXPECT_FALSE(align(model, view, params).single_view);
-  params.scene_view = SceneView::single_view;
-  params.sensor_origin = Eigen::Vector3d(0.0, 0.0, 2.0);
+  params.scene.scene_view = SceneView::single_view;
+  params.scene.sensor_origin = Eigen::Vector3d(0.0, 0.0, 2.0);
   EXPECT_TRUE(align(model, box, params).single_view);  // declared: not detected
   // The deprecated field stands for a declared single view from it.
   AlignParams old;
-  old.max_iterations = 5;
-  old.hypotheses = 4;
-  old.refinements = 1;
-  old.scene_view = SceneView::all_sides;
-  old.scene_viewpoint = Eigen::Vector3d::Zero();
+  old.local.max_iterations = 5;
+  old.search.hypotheses = 4;
+  old.search.refinements = 1;
+  old.scene.scene_view = SceneView::all_sides;
+  old.scene.scene_viewpoint = Eigen::Vector3d::Zero();
   AlignParams declared = old;
-  declared.scene_viewpoint.reset();
-  declared.scene_view = SceneView::single_view;
+  declared.scene.scene_viewpoint.reset();
+  declared.scene.scene_view = SceneView::single_view;
   const AlignResult a = align(model, view, old), b = align(model, view, declared);
   EXPECT_TRUE(a.single_view);
   EXPECT_EQ(a.T_scene_model, b.T_scene_model);
@@ -296,10 +296,10 @@ TEST(AlignmentVoxel, FollowsTheRuleFromObjectsToRooms) {
   EXPECT_NEAR(alignment_voxel_size(point, room), 4.0 / 12.0, 0.01);
   const PointCloud ball = sphere(0.06, Eigen::Vector3d::Zero(), 3000, rng);
   AlignParams params;
-  params.global_search = false;
-  params.max_iterations = 1;
+  params.search.global_search = false;
+  params.local.max_iterations = 1;
   EXPECT_DOUBLE_EQ(align(ball, ball, params).voxel_size, alignment_voxel_size(ball, ball));
-  params.voxel_size = 0.004;
+  params.scene.voxel_size = 0.004;
   EXPECT_DOUBLE_EQ(align(ball, ball, params).voxel_size, 0.004);
 }
 
@@ -330,8 +330,8 @@ TEST(InitialGuess, ANeighbourhoodPicksTheGuessedOfTwoCopies) {
     guess.topRightCorner<3, 1>() += Eigen::Vector3d(0.02, -0.01, 0.01);
     AlignParams params;
     params.initial_guess = guess;
-    params.guess_angle_deg = 30.0;
-    params.guess_distance = 0.05;
+    params.search.guess_angle_deg = 30.0;
+    params.search.guess_distance = 0.05;
     const AlignResult result = align(model, scene, params);
     EXPECT_LT(rotation_error_degrees(result.T_scene_model, truth), 1.0);
     EXPECT_LT(translation_error_mm(result.T_scene_model, truth), 2.0);
@@ -341,10 +341,10 @@ TEST(InitialGuess, ANeighbourhoodPicksTheGuessedOfTwoCopies) {
 TEST(InitialGuess, RefusesANeighbourhoodOutOfRange) {
   const Case c = make_case(10.0, 3);
   AlignParams params;
-  params.guess_angle_deg = 181.0;
+  params.search.guess_angle_deg = 181.0;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
-  params.guess_angle_deg = 0.0;
-  params.guess_distance = -0.1;
+  params.search.guess_angle_deg = 0.0;
+  params.search.guess_distance = -0.1;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
 }
 
@@ -354,8 +354,8 @@ TEST(AlignResult, HistoryDescribesTheReturnedPose) {
   for (unsigned seed = 0; seed < 6; ++seed) {
     const Case c = make_case(60.0 + 20.0 * seed, 50 + seed);
     AlignParams params;
-    params.polish = false;
-    params.icp_refinement = false;
+    params.refinement.polish = false;
+    params.refinement.icp_refinement = false;
     const AlignResult result = align(c.model, c.scene, params);
     EXPECT_EQ(result.iterations, int(result.history.size()));
     if (result.stop_reason == AlignStopReason::kept_start) {
@@ -370,7 +370,7 @@ TEST(AlignResult, HistoryDescribesTheReturnedPose) {
                 1e-9);
       const AlignIteration& last = result.history.back();
       EXPECT_EQ(result.converged,
-                last.translation_step + last.rotation_gradient < params.tolerance);
+                last.translation_step + last.rotation_gradient < params.local.tolerance);
     }
   }
 }

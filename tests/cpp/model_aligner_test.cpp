@@ -42,14 +42,14 @@ Transform motion(double degrees, const Eigen::Vector3d& axis, const Eigen::Vecto
 // The servo's settings: one iteration of Algorithm 1 from the identity, bounded search.
 AlignParams servo_params() {
   AlignParams params;
-  params.voxel_size = 0.015;
-  params.bandwidth = 8;
-  params.global_search = false;
-  params.max_iterations = 1;
-  params.translation_gain = 1.0;
-  params.rotation_gain = 1.0;
-  params.max_rotation_step = 0.05;
-  params.max_translation = 0.3;
+  params.scene.voxel_size = 0.015;
+  params.scene.bandwidth = 8;
+  params.search.global_search = false;
+  params.local.max_iterations = 1;
+  params.local.translation_gain = 1.0;
+  params.local.rotation_gain = 1.0;
+  params.local.max_rotation_step = 0.05;
+  params.local.max_translation = 0.3;
   return params;
 }
 
@@ -102,9 +102,9 @@ TEST(ModelAligner, OneIterationStepsMatchAlignOnASequenceOfViews) {
 // The servo's bounded search run to convergence (40 iterations at half gains).
 AlignParams converging_params() {
   AlignParams params = servo_params();
-  params.max_iterations = 40;
-  params.translation_gain = 0.5;
-  params.rotation_gain = 0.5;
+  params.local.max_iterations = 40;
+  params.local.translation_gain = 0.5;
+  params.local.rotation_gain = 0.5;
   return params;
 }
 
@@ -170,8 +170,8 @@ TEST(ModelAligner, FitnessIsAlignsWhereTheModelOnlyPartlyMeetsTheScene) {
   AlignParams params = servo_params();
   for (const bool visible : {false, true}) {
     if (visible) {
-      params.scene_view = SceneView::single_view;
-      params.sensor_origin = Eigen::Vector3d(0.1, 0.0, 1.0);
+      params.scene.scene_view = SceneView::single_view;
+      params.scene.sensor_origin = Eigen::Vector3d(0.1, 0.0, 1.0);
     }
     ModelAligner aligner(model, params);
     for (const PointCloud* scene : {&full, &part}) {
@@ -213,7 +213,7 @@ TEST(ModelAligner, WithoutVerificationThePoseAndFitnessAreTheSame) {
   const PointCloud model = table_scene(rng);
   const AlignParams verified = servo_params();
   AlignParams unverified = verified;
-  unverified.verify = false;
+  unverified.verification.verify = false;
   ModelAligner with(model, verified), without(model, unverified);
   for (const Eigen::Vector3d& t : {Eigen::Vector3d(0.02, -0.01, 0.0), Eigen::Vector3d(0, 0, 0)}) {
     const Transform truth = motion(3.0, Eigen::Vector3d(1, 2, 3), t);
@@ -249,15 +249,15 @@ TEST(ModelAligner, OtherModesRunAlign) {
   const PointCloud scene =
       test::box_and_sphere(3000, rng).transformed(motion(40.0, {1, 1, 0}, {0.05, 0, 0}));
   AlignParams params;
-  params.voxel_size = 0.01;
-  params.hypotheses = 4;
-  params.refinements = 1;
+  params.scene.voxel_size = 0.01;
+  params.search.hypotheses = 4;
+  params.search.refinements = 1;
   expect_same(ModelAligner(model, params).align(scene), align(model, scene, params));
-  params.global_search = false;
-  params.max_translation = 0.0;
+  params.search.global_search = false;
+  params.local.max_translation = 0.0;
   expect_same(ModelAligner(model, params).align(scene), align(model, scene, params));
   EXPECT_EQ(ModelAligner(model, params).model_coefficients().size(),
-            params.bandwidth * params.bandwidth);
+            params.scene.bandwidth * params.scene.bandwidth);
 }
 
 TEST(ModelAligner, RefusesBadInput) {
@@ -267,7 +267,7 @@ TEST(ModelAligner, RefusesBadInput) {
   EXPECT_THROW(ModelAligner(PointCloud(model.points()), servo_params()),
                std::invalid_argument);  // no normals
   AlignParams params = servo_params();
-  params.bandwidth = 1;
+  params.scene.bandwidth = 1;
   EXPECT_THROW(ModelAligner(model, params), std::invalid_argument);
   ModelAligner aligner(model, servo_params());
   EXPECT_THROW(aligner.align(PointCloud()), std::invalid_argument);

@@ -43,20 +43,20 @@ Transform pose(double angle_deg, const Eigen::Vector3d& axis, const Eigen::Vecto
 // The global search with few hypotheses: the settings of a test, not of a user.
 AlignParams global_params(int bandwidth) {
   AlignParams p;
-  p.bandwidth = bandwidth;
-  p.hypotheses = 4;
-  p.refinements = 1;
+  p.scene.bandwidth = bandwidth;
+  p.search.hypotheses = 4;
+  p.search.refinements = 1;
   return p;
 }
 
 // The servo's bounded local search (ModelAligner prepares the model's side once).
 AlignParams local_params() {
   AlignParams p;
-  p.voxel_size = 0.012;
-  p.bandwidth = 8;
-  p.global_search = false;
-  p.max_iterations = 3;
-  p.max_translation = 0.1;
+  p.scene.voxel_size = 0.012;
+  p.scene.bandwidth = 8;
+  p.search.global_search = false;
+  p.local.max_iterations = 3;
+  p.local.max_translation = 0.1;
   return p;
 }
 

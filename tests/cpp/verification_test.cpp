@@ -201,11 +201,11 @@ TEST(AlignAlternatives, NoneAskedNoneSought) {
   std::mt19937 rng(3);
   const PointCloud model = box(2000, rng);
   AlignParams params;
-  params.max_alternatives = 0;
+  params.verification.max_alternatives = 0;
   const AlignResult result = align(model, box(2000, rng).transformed(true_pose()), params);
   EXPECT_TRUE(result.alternatives.empty());
   EXPECT_FALSE(result.ambiguous);
-  params.max_alternatives = 65;
+  params.verification.max_alternatives = 65;
   EXPECT_THROW(align(model, model, params), std::invalid_argument);
 }
 

@@ -153,3 +153,59 @@ def test_a_deprecated_alias_is_a_keyword_but_not_a_field_of_the_repr():
     assert "scene_viewpoint" not in text
     assert "sensor_origin=[0.1, 0.0, 0.0]," in text and "scene_view='single_view'," in text
     assert eval(text, {"AlignParams": svs.AlignParams}) == params
+
+
+GROUPS = {
+    "scene": svs.SceneParams,
+    "local": svs.LocalParams,
+    "search": svs.GlobalSearchParams,
+    "refinement": svs.RefinementParams,
+    "verification": svs.VerificationParams,
+}
+
+
+def test_align_params_groups_hold_every_grouped_field_under_its_flat_name():
+    params = svs.AlignParams()
+    grouped = []
+    for name, cls in GROUPS.items():
+        group = getattr(params, name)
+        assert isinstance(group, cls) and group == cls()  # the C++ defaults, per group
+        grouped += fields_of(cls)
+    top = [name for name in fields_of(svs.AlignParams) if name not in grouped]
+    assert top == ["initial_guess", "threads", "max_seconds", "max_voxels"]
+    assert len(grouped) + len(top) == len(fields_of(svs.AlignParams))
+
+
+def test_a_group_is_a_reference_into_the_params_and_the_flat_field_is_the_same_value():
+    params = svs.AlignParams(voxel_size=0.005, hypotheses=8)
+    assert params.scene.voxel_size == 0.005 and params.search.hypotheses == 8
+    params.search.hypotheses = 12
+    params.refinement.polish = False
+    params.scene.sensor_origin = (0.0, 0.0, 0.5)
+    assert params.hypotheses == 12 and params.polish is False
+    np.testing.assert_array_equal(params.sensor_origin, [0.0, 0.0, 0.5])
+    params.max_iterations = 7
+    assert params.local.max_iterations == 7
+    assert params == svs.AlignParams(
+        voxel_size=0.005, hypotheses=12, polish=False, sensor_origin=(0, 0, 0.5), max_iterations=7
+    )
+    detached = copy.copy(params.search)
+    detached.hypotheses = 3
+    assert params.hypotheses == 12  # a copy of a group is its own
+
+
+def test_a_group_is_no_keyword_and_cannot_be_replaced():
+    with pytest.raises(TypeError, match="unexpected keyword argument 'search'"):
+        svs.AlignParams(search=svs.GlobalSearchParams())
+    with pytest.raises(AttributeError):
+        svs.AlignParams().search = svs.GlobalSearchParams()  # type: ignore[misc]
+    with pytest.raises(TypeError, match="'search'"):
+        svs.align(np.zeros((3, 3)), np.zeros((3, 3)), search=1)
+
+
+def test_the_deprecated_alias_works_in_its_group_too():
+    scene = svs.SceneParams()
+    with pytest.warns(DeprecationWarning, match="sensor_origin"):
+        scene.scene_viewpoint = (0.1, 0.0, 0.0)
+    assert scene.scene_view == "single_view"
+    assert "scene_viewpoint" not in repr(scene)

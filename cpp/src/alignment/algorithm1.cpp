@@ -19,7 +19,7 @@ double seconds_between(Clock::time_point from, Clock::time_point to) {
 
 }  // namespace
 
-Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params) {
+Eigen::Vector3d rotation_step(const CorrelationValue& c, const LocalParams& params) {
   Eigen::Vector3d omega = params.rotation_gain * c.gradient;
   if (params.rotation_step == RotationStep::newton) {
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(c.hessian);
@@ -32,7 +32,7 @@ Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& para
   return omega;
 }
 
-double capped_step(double step, const AlignParams& params, bool* capped) {
+double capped_step(double step, const LocalParams& params, bool* capped) {
   *capped = std::abs(step) > params.max_rotation_step;
   return *capped ? std::copysign(params.max_rotation_step, step) : step;
 }
@@ -40,28 +40,28 @@ double capped_step(double step, const AlignParams& params, bool* capped) {
 AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
                            int max_iterations, Algorithm1Timings* timings) {
   const AlignParams& params = problem.params;
-  const bool newton = params.rotation_step == RotationStep::newton;
+  const bool newton = params.local.rotation_step == RotationStep::newton;
   AlignResult result;
   for (int iteration = 0; iteration < max_iterations; ++iteration) {
     const auto start = Clock::now();
     const CorrelationValue c = problem.correlation.evaluate(pose.R, newton);
-    pose.R = pose.R * exp_so3(rotation_step(c, params));
+    pose.R = pose.R * exp_so3(rotation_step(c, params.local));
     const auto rotated = Clock::now();
 
     const TranslationEstimate shift = source.estimate(problem.model.move(pose));
-    const Eigen::Vector3d step = params.translation_gain * shift.shift;
+    const Eigen::Vector3d step = params.local.translation_gain * shift.shift;
     pose.offset += step;
     const auto translated = Clock::now();
 
     AlignIteration record;
     record.seconds = seconds_between(start, translated);
-    record.translation_step = step.norm() / params.voxel_size;
+    record.translation_step = step.norm() / params.scene.voxel_size;
     record.rotation_gradient = c.gradient.norm();
     record.correlation = c.value;
     record.translation_peak = shift.peak;
     record.translation_cost = source.translation_cost();
     record.rotation_cost = rotation_cost(problem.scene_coefficients, problem.model_coefficients,
-                                         pose.R, params.bandwidth, true);
+                                         pose.R, params.scene.bandwidth, true);
     record.T_scene_model = problem.model.transform_of(pose);
     result.history.push_back(record);
     result.iterations = iteration + 1;
@@ -70,7 +70,7 @@ AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, Transla
       timings->translation += seconds_between(rotated, translated);
       timings->records += seconds_between(translated, Clock::now());
     }
-    if (record.translation_step + record.rotation_gradient < params.tolerance) {
+    if (record.translation_step + record.rotation_gradient < params.local.tolerance) {
       result.converged = true;
       result.stop_reason = AlignStopReason::converged;
       break;
@@ -98,15 +98,16 @@ AxisRotationStep rotation_step_about(So3Correlation& correlation, const Eigen::M
   if (!(length > 0.0) || !std::isfinite(length))
     detail::fail("axis must be a finite, non-zero direction, got ", axis.transpose());
   const Eigen::Vector3d a = axis / length;
-  const bool newton_law = params.rotation_step == RotationStep::newton;
+  const bool newton_law = params.local.rotation_step == RotationStep::newton;
   const CorrelationValue c = correlation.evaluate(R, newton_law);
   AxisRotationStep out;
   out.slope = a.dot(c.gradient);
   out.curvature = newton_law ? a.dot(c.hessian * a) : 0.0;
   // The law of detail::rotation_step, in one dimension.
   out.newton = newton_law && out.curvature < 0.0;
-  const double step = params.rotation_gain * (out.newton ? -out.slope / out.curvature : out.slope);
-  out.turn = detail::capped_step(step, params, &out.capped);
+  const double step =
+      params.local.rotation_gain * (out.newton ? -out.slope / out.curvature : out.slope);
+  out.turn = detail::capped_step(step, params.local, &out.capped);
   return out;
 }
 

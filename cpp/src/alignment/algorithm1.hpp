@@ -47,17 +47,17 @@ struct Algorithm1Problem {
   const ShCoefficients& scene_coefficients;
   const ShCoefficients& model_coefficients;
   MovingModel& model;
-  const AlignParams& params;  // gains, step law, tolerance, bandwidth
+  const AlignParams& params;  // local (gains, step law, tolerance), scene (voxel, bandwidth)
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
 };
 
 /// The rotation of one iteration from the correlation at the current rotation: the
 /// Newton step (where the Hessian is negative definite) or the gradient law, times
 /// rotation_gain, capped at max_rotation_step; a rotation vector, radians.
-Eigen::Vector3d rotation_step(const CorrelationValue& c, const AlignParams& params);
+Eigen::Vector3d rotation_step(const CorrelationValue& c, const LocalParams& params);
 
 /// `step` (radians) cut to +-max_rotation_step; `capped` tells whether it was.
-double capped_step(double step, const AlignParams& params, bool* capped);
+double capped_step(double step, const LocalParams& params, bool* capped);
 
 /// Algorithm 1 from `pose` until the stop rule of eq. (17), `max_iterations` or the
 /// deadline; `pose` is left where it ended. Returns that pose, the history, converged, stop_reason,

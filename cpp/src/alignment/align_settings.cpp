@@ -1,4 +1,5 @@
-// The checks and derived values of AlignParams that every stage of align() reads.
+// The checks and derived values of AlignParams that every stage of align() reads: each
+// group checked on its own.
 #include "alignment/align_detail.hpp"
 #include "alignment/stages.hpp"
 #include "common/checks.hpp"
@@ -8,13 +9,20 @@
 
 namespace spectral_vs::detail {
 
-void check_align_params(const AlignParams& p) {
+namespace {
+
+void check(const SceneParams& p) {
   if (!(p.voxel_size >= 0.0 && std::isfinite(p.voxel_size))) {
     fail("voxel_size must be >= 0 metres (0: derived from the model), got ", p.voxel_size);
   }
   if (p.bandwidth < 2 || p.bandwidth > kMaxBandwidth) {
     fail("bandwidth must be in [2, ", kMaxBandwidth, "], got ", p.bandwidth);
   }
+  if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
+  if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
+}
+
+void check(const LocalParams& p) {
   if (!(p.translation_gain > 0.0 && p.translation_gain <= 1.0)) {
     fail("translation_gain must be in (0, 1], got ", p.translation_gain);
   }
@@ -25,9 +33,12 @@ void check_align_params(const AlignParams& p) {
   detail::require_positive_finite(p.max_rotation_step, "max_rotation_step");
   detail::require_positive_finite(p.tolerance, "tolerance");
   if (p.max_iterations < 1) fail("max_iterations must be >= 1, got ", p.max_iterations);
-  if (p.refinement_iterations < 1) {
-    fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
+  if (!(p.max_translation >= 0.0 && std::isfinite(p.max_translation))) {
+    fail("max_translation must be >= 0 metres (0: unbounded), got ", p.max_translation);
   }
+}
+
+void check(const GlobalSearchParams& p) {
   if (p.hypotheses < 1) fail("hypotheses must be >= 1, got ", p.hypotheses);
   if (p.refinements < 1 || p.refinements > p.hypotheses) {
     fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
@@ -35,37 +46,51 @@ void check_align_params(const AlignParams& p) {
   if (!(p.search_voxel_size >= 0.0 && std::isfinite(p.search_voxel_size))) {
     fail("search_voxel_size must be >= 0 metres (0: automatic), got ", p.search_voxel_size);
   }
-  if (!(p.max_translation >= 0.0 && std::isfinite(p.max_translation))) {
-    fail("max_translation must be >= 0 metres (0: unbounded), got ", p.max_translation);
-  }
   if (!(p.window_margin >= 0.0 && std::isfinite(p.window_margin))) {
     fail("window_margin must be >= 0 metres (0: automatic), got ", p.window_margin);
   }
-  if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
-  if (!(p.max_seconds >= 0.0 && std::isfinite(p.max_seconds))) {
-    fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);
-  }
-  require_rigid_transform(p.initial_guess, "initial_guess");
   if (!(p.guess_angle_deg >= 0.0 && p.guess_angle_deg <= 180.0)) {
     fail("guess_angle_deg must be in [0, 180] degrees (0: no limit), got ", p.guess_angle_deg);
   }
   if (!(p.guess_distance >= 0.0 && std::isfinite(p.guess_distance))) {
     fail("guess_distance must be >= 0 metres (0: no limit), got ", p.guess_distance);
   }
-  if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
-  if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
+}
+
+void check(const RefinementParams& p) {
+  if (p.refinement_iterations < 1) {
+    fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
+  }
+}
+
+void check(const VerificationParams& p) {
   if (p.max_alternatives < 0 || p.max_alternatives > 64) {
     fail("max_alternatives must be in [0, 64], got ", p.max_alternatives);
   }
 }
 
-bool has_neighbourhood(const AlignParams& p) {
-  return p.guess_angle_deg > 0.0 || p.guess_distance > 0.0;
+}  // namespace
+
+void check_align_params(const AlignParams& p) {
+  check(p.scene);
+  check(p.local);
+  check(p.search);
+  check(p.refinement);
+  check(p.verification);
+  if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
+  if (!(p.max_seconds >= 0.0 && std::isfinite(p.max_seconds))) {
+    fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);
+  }
+  require_rigid_transform(p.initial_guess, "initial_guess");
+}
+
+bool has_neighbourhood(const GlobalSearchParams& search) {
+  return search.guess_angle_deg > 0.0 || search.guess_distance > 0.0;
 }
 
 double window_margin(double search_voxel, const AlignParams& params) {
-  if (params.window_margin > 0.0) return params.window_margin;
-  return std::max(5.0 * params.voxel_size, 2.5 * search_voxel);
+  if (params.search.window_margin > 0.0) return params.search.window_margin;
+  return std::max(5.0 * params.scene.voxel_size, 2.5 * search_voxel);
 }
 
 std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
@@ -78,7 +103,7 @@ std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
 
 PhaseCorrelationParams phase_params(const AlignParams& params) {
   PhaseCorrelationParams p;
-  p.subvoxel = params.subvoxel;
+  p.subvoxel = params.local.subvoxel;
   p.threads = params.threads;
   p.limits = params.limits;
   return p;

@@ -34,15 +34,17 @@ struct Prepared {
            const ScoredModel& moving)
       // Beyond the paper: a table under the objects dominates both the scene's EGI and its
       // voxel grid; searched without it, the object stands out. Fitness still sees it.
-      : plane(params.global_search && params.suppress_support_plane
-                  ? support_plane(scene, params.voxel_size, 4.0 * moving.reach())
+      : plane(params.search.global_search && params.scene.suppress_support_plane
+                  ? support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach())
                   : std::nullopt),
-        searched(plane ? without_support_plane(scene, params.voxel_size, 4.0 * moving.reach())
+        searched(plane ? without_support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach())
                        : scene),
-        scene_map(searched, scene, params.voxel_size, params.limits),
-        model_coefficients(egi_coefficients(model, params.bandwidth, params.egi_method)),
-        scene_coefficients(egi_coefficients(searched, params.bandwidth, params.egi_method)),
-        correlation(scene_coefficients, model_coefficients, params.bandwidth, true),
+        scene_map(searched, scene, params.scene.voxel_size, params.limits),
+        model_coefficients(
+            egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method)),
+        scene_coefficients(
+            egi_coefficients(searched, params.scene.bandwidth, params.scene.egi_method)),
+        correlation(scene_coefficients, model_coefficients, params.scene.bandwidth, true),
         view(single_view_image(scene, params)),
         viewpoint(view ? std::optional<Eigen::Vector3d>(scene_sensor_origin(params))
                        : std::nullopt) {}
@@ -79,23 +81,22 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
       prepared.problem(moving, params, window_margin(0.0, params), deadline, std::nullopt, true);
   const Pose start = moving.pose_of(params.initial_guess);
   SceneTranslation whole_scene =
-      params.max_translation > 0.0
-          ? SceneTranslation(prepared.scene_map, box_of(moving.move(start)), params.max_translation,
-                             params.voxel_size, params.occupancy, phase_params(params),
-                             params.limits)
+      params.local.max_translation > 0.0
+          ? SceneTranslation(prepared.scene_map, box_of(moving.move(start)),
+                             params.local.max_translation, params.scene.voxel_size,
+                             params.scene.occupancy, phase_params(params), params.limits)
           : SceneTranslation(prepared.scene_map, moving.centre(start), moving.reach(),
-                             params.voxel_size, params.occupancy, phase_params(params),
+                             params.scene.voxel_size, params.scene.occupancy, phase_params(params),
                              params.limits);
   std::optional<TranslationWindow> window;
   SceneThenWindow source(problem, whole_scene, window);
   AlignResult result =
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
-                              source, params.max_iterations);
-  // The servo reads only the fitness; the check (AlignParams::verify) is its to skip.
-  if (params.verify) {
-    set_verification(
-        result,
-        Verifier(scene, params.voxel_size, prepared.viewpoint).verify(model, result.T_scene_model));
+                              source, params.local.max_iterations);
+  // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
+  if (params.verification.verify) {
+    set_verification(result, Verifier(scene, params.scene.voxel_size, prepared.viewpoint)
+                                 .verify(model, result.T_scene_model));
   }
   return result;
 }
@@ -108,22 +109,23 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
   const AlignParams& params = problem.params;
   std::vector<std::vector<Eigen::Index>> parts;
   if (prepared.plane) {
-    parts =
-        object_parts(prepared.searched, prepared.plane, problem.model.reach(), params.voxel_size);
+    parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(),
+                         params.scene.voxel_size);
     keep_parts_near_guess(problem, prepared.searched, parts);
   } else if (prepared.view) {
     parts.push_back(whole_view(prepared.searched));
   }
   std::vector<Hypothesis> hypotheses;
-  if (parts.empty() && !(prepared.plane && params.guess_distance > 0.0)) {
+  if (parts.empty() && !(prepared.plane && params.search.guess_distance > 0.0)) {
     hypotheses =
         global_hypotheses(problem, prepared.correlation, prepared.scene_coefficients, search_voxel);
     seed_with_guess(problem, hypotheses, search_voxel);
   } else {
-    const int per_part = prepared.plane ? std::max(1, params.hypotheses / 2) : params.hypotheses;
+    const int per_part =
+        prepared.plane ? std::max(1, params.search.hypotheses / 2) : params.search.hypotheses;
     hypotheses = part_hypotheses(problem, parts, per_part, window);
-    seed_with_guess(problem, hypotheses, params.voxel_size);
-    turn_about_flat_axis(problem, hypotheses, params.voxel_size);
+    seed_with_guess(problem, hypotheses, params.scene.voxel_size);
+    turn_about_flat_axis(problem, hypotheses, params.scene.voxel_size);
   }
   return hypotheses;
 }
@@ -133,9 +135,9 @@ std::vector<const Hypothesis*> refined_hypotheses(const std::vector<Hypothesis>&
                                                   const AlignParams& params) {
   std::vector<const Hypothesis*> refined;
   const std::size_t runs =
-      std::min<std::size_t>(std::size_t(params.refinements), hypotheses.size());
+      std::min<std::size_t>(std::size_t(params.search.refinements), hypotheses.size());
   for (std::size_t i = 0; i < runs; ++i) refined.push_back(&hypotheses[i]);
-  if (has_neighbourhood(params)) {
+  if (has_neighbourhood(params.search)) {
     const auto guess = std::find_if(hypotheses.begin(), hypotheses.end(),
                                     [](const Hypothesis& h) { return h.index == -1; });
     if (guess != hypotheses.end() && std::size_t(guess - hypotheses.begin()) >= runs)
@@ -158,9 +160,10 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
     // Fitness tells a mug upright from upside down only with its handle in place, and a
     // view's fitness a pose from its near-symmetric flip only at a precise pose: each
     // result is swept and refined before they are compared.
-    if (params.polish && problem.flat_axis)
+    if (params.refinement.polish && problem.flat_axis)
       sweep_result_about(problem, window, result, *problem.flat_axis);
-    if (params.icp_refinement && prepared.view) refine_with_icp(problem, model, scene, result);
+    if (params.refinement.icp_refinement && prepared.view)
+      refine_with_icp(problem, model, scene, result);
     out_of_time = result.stop_reason == AlignStopReason::max_seconds || expired(problem);
     if (i == 0 || better(result, best)) best = std::move(result);
   }
@@ -171,8 +174,9 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
     return best;
   }
   // Without the ICP, which reaches past it at a fraction of its cost.
-  if (params.polish && !params.icp_refinement) polish_result_rotation(problem, window, best);
-  if (params.icp_refinement) refine_with_icp(problem, model, scene, best);
+  if (params.refinement.polish && !params.refinement.icp_refinement)
+    polish_result_rotation(problem, window, best);
+  if (params.refinement.icp_refinement) refine_with_icp(problem, model, scene, best);
   return best;
 }
 
@@ -182,8 +186,8 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
                            Clock::time_point deadline) {
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis =
-      flat_axis(prepared.model_coefficients, params.bandwidth);
-  const bool dense = dense_for_polish(model.points(), params.voxel_size);
+      flat_axis(prepared.model_coefficients, params.scene.bandwidth);
+  const bool dense = dense_for_polish(model.points(), params.scene.voxel_size);
   const Problem problem =
       prepared.problem(moving, params, window_margin(search_voxel, params), deadline, axis, dense);
   std::optional<TranslationWindow> window;
@@ -191,10 +195,10 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
   AlignResult best =
       refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), window);
   best.search_voxel_size = search_voxel;
-  const Verifier verifier(scene, params.voxel_size, prepared.viewpoint);
+  const Verifier verifier(scene, params.scene.voxel_size, prepared.viewpoint);
   set_verification(best, verifier.verify(model, best.T_scene_model));
   if (best.stop_reason != AlignStopReason::max_seconds) {
-    AlternativeSources sources{prepared.model_coefficients, params.bandwidth, axis, {}};
+    AlternativeSources sources{prepared.model_coefficients, params.scene.bandwidth, axis, {}};
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
     find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
@@ -212,13 +216,13 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   check_align_params(given);
   const Clock::time_point deadline = deadline_of(given, Clock::now());
   AlignParams params = given;
-  if (params.voxel_size == 0.0) params.voxel_size = alignment_voxel_size(model, scene);
+  if (params.scene.voxel_size == 0.0) params.scene.voxel_size = alignment_voxel_size(model, scene);
   ScoredModel moving(model);
   Prepared prepared(model, scene, params, moving);
-  AlignResult result = params.global_search
+  AlignResult result = params.search.global_search
                            ? align_globally(model, scene, params, moving, prepared, deadline)
                            : align_from_guess(model, scene, params, moving, prepared, deadline);
-  result.voxel_size = params.voxel_size;
+  result.voxel_size = params.scene.voxel_size;
   result.single_view = prepared.view.has_value();
   return result;
 }

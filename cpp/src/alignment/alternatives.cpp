@@ -168,7 +168,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
                        const std::optional<Eigen::Vector3d>& viewpoint, AlignResult& result) {
   result.alternatives.clear();
   result.ambiguous = false;
-  if (params.max_alternatives == 0) return;
+  if (params.verification.max_alternatives == 0) return;
   const Eigen::Vector3d c = model.centroid();
   const Transform& T = result.T_scene_model;
 
@@ -226,34 +226,35 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     return a.verification.inliers > b.verification.inliers;
   });
   candidates.resize(std::min<std::size_t>(
-      candidates.size(), std::size_t(kRefinedPerAlternative * params.max_alternatives)));
+      candidates.size(),
+      std::size_t(kRefinedPerAlternative * params.verification.max_alternatives)));
   const double sparse_confidence = sparse_returned.confidence;
   std::vector<Candidate> screened;
   for (const Candidate& candidate : candidates) {
-    if (passes_screening(sparse, verifier, candidate, T, c, sparse_confidence, params.voxel_size,
-                         viewpoint))
+    if (passes_screening(sparse, verifier, candidate, T, c, sparse_confidence,
+                         params.scene.voxel_size, viewpoint))
       screened.push_back(candidate);
   }
   candidates = std::move(screened);
   for (Candidate& candidate : candidates) {
     if (candidate.turn) {
-      candidate.T = refine_translation(model, verifier.fine_grid(), candidate.T, params.voxel_size,
-                                       viewpoint);
+      candidate.T = refine_translation(model, verifier.fine_grid(), candidate.T,
+                                       params.scene.voxel_size, viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
       continue;
     }
-    candidate.T = refine_by_icp(model, verifier, candidate.T, params.voxel_size, viewpoint);
+    candidate.T = refine_by_icp(model, verifier, candidate.T, params.scene.voxel_size, viewpoint);
     candidate.verification = verifier.verify(model, candidate.T);
   }
   std::stable_sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
     return a.verification.confidence > b.verification.confidence;
   });
   for (const Candidate& candidate : candidates) {
-    if (int(result.alternatives.size()) == params.max_alternatives) break;
+    if (int(result.alternatives.size()) == params.verification.max_alternatives) break;
     if (candidate.verification.confidence < result.confidence - kAlternativeMargin) break;
     if (!apart(candidate.T, T, c)) continue;
     if (candidate.turn && !flat_along_turn(model, verifier, candidate, T, c, *sources.flat_axis,
-                                           params.voxel_size, viewpoint))
+                                           params.scene.voxel_size, viewpoint))
       continue;
     const bool distinct = std::all_of(
         result.alternatives.begin(), result.alternatives.end(),

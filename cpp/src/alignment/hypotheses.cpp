@@ -35,10 +35,10 @@ double turn_deg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
 }  // namespace
 
 double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params) {
-  if (params.search_voxel_size > 0.0) return params.search_voxel_size;
+  if (params.search.search_voxel_size > 0.0) return params.search.search_voxel_size;
   const Eigen::Vector3d extent = bounding_box(scene).sizes().array() + 4.0 * reach;
   const double fitting = std::cbrt(extent.prod() / kSearchGridVoxels);
-  return std::max(2.0 * params.voxel_size, fitting);
+  return std::max(2.0 * params.scene.voxel_size, fitting);
 }
 
 // Beyond the paper: the best rotations of the SO(3) search, each refined on the EGI
@@ -49,15 +49,15 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
                                           double search_voxel) {
   const AlignParams& params = problem.params;
   So3SearchParams search;
-  search.candidates = params.hypotheses;
+  search.candidates = params.search.hypotheses;
   search.threads = params.threads;
   const auto candidates =
-      so3_search(scene_coefficients, problem.model_coefficients, params.bandwidth, search);
+      so3_search(scene_coefficients, problem.model_coefficients, params.scene.bandwidth, search);
   const Eigen::Vector3d start = problem.scene.cloud().centroid();
   SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel,
-                          params.occupancy, phase_params(params), params.limits);
+                          params.scene.occupancy, phase_params(params), params.limits);
   RotationRefineParams refine;
-  refine.newton = params.rotation_step == RotationStep::newton;
+  refine.newton = params.local.rotation_step == RotationStep::newton;
   std::vector<Hypothesis> hypotheses;
   for (std::size_t h = 0; h < candidates.size(); ++h) {
     if (h > 0 && expired(problem)) break;  // the best-correlated ones are first
@@ -87,7 +87,7 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
   search.candidates = per_part;
   search.threads = params.threads;
   RotationRefineParams refine;
-  refine.newton = params.rotation_step == RotationStep::newton;
+  refine.newton = params.local.rotation_step == RotationStep::newton;
   std::vector<Hypothesis> hypotheses;
   std::optional<TranslationWindow> coarse;
   for (const auto& part : parts) {
@@ -97,10 +97,10 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
     for (const Eigen::Index i : part) centroid += scene.points().row(i).transpose();
     centroid /= double(part.size());
     const ShCoefficients coefficients =
-        egi_coefficients(normals, params.bandwidth, params.egi_method);
+        egi_coefficients(normals, params.scene.bandwidth, params.scene.egi_method);
     std::optional<So3Correlation> correlation;
     try {
-      correlation.emplace(coefficients, problem.model_coefficients, params.bandwidth, true);
+      correlation.emplace(coefficients, problem.model_coefficients, params.scene.bandwidth, true);
     } catch (const std::invalid_argument&) {
       continue;  // a part whose normals have no structure
     }
@@ -109,11 +109,11 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       coarse->place(centroid);
     } else {
       coarse.emplace(problem.scene, problem.model.reach(), problem.margin, centroid,
-                     kCoarsePlacement * params.voxel_size, params.occupancy, phase_params(params),
-                     params.limits);
+                     kCoarsePlacement * params.scene.voxel_size, params.scene.occupancy,
+                     phase_params(params), params.limits);
     }
     for (const RotationCandidate& candidate :
-         so3_search(coefficients, problem.model_coefficients, params.bandwidth, search)) {
+         so3_search(coefficients, problem.model_coefficients, params.scene.bandwidth, search)) {
       Hypothesis hypothesis;
       hypothesis.index = int(hypotheses.size());
       hypothesis.pose.R = refine_rotation(*correlation, candidate.R, refine).R;
@@ -125,8 +125,8 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       // Twice: the coarse shift brings the model near enough for the fine one to be exact.
       hypothesis.pose.offset += coarse->estimate(problem.model.move(hypothesis.pose)).shift;
       hypothesis.pose.offset += window->estimate(problem.model.move(hypothesis.pose)).shift;
-      hypothesis.fitness =
-          problem.model.fitness(problem.scene, problem.view, hypothesis.pose, params.voxel_size);
+      hypothesis.fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
+                                                 params.scene.voxel_size);
       hypotheses.push_back(hypothesis);
     }
   }
@@ -184,10 +184,10 @@ void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses
   guess.fitness = problem.model.fitness(problem.scene, problem.view, guess.pose, tolerance);
   const Eigen::Vector3d centre = problem.model.centre(guess.pose);
   const auto outside = [&](const Hypothesis& h) {
-    return (params.guess_angle_deg > 0.0 &&
-            turn_deg(h.pose.R, guess.pose.R) > params.guess_angle_deg) ||
-           (params.guess_distance > 0.0 &&
-            (problem.model.centre(h.pose) - centre).norm() > params.guess_distance);
+    return (params.search.guess_angle_deg > 0.0 &&
+            turn_deg(h.pose.R, guess.pose.R) > params.search.guess_angle_deg) ||
+           (params.search.guess_distance > 0.0 &&
+            (problem.model.centre(h.pose) - centre).norm() > params.search.guess_distance);
   };
   hypotheses.erase(std::remove_if(hypotheses.begin(), hypotheses.end(), outside), hypotheses.end());
   hypotheses.push_back(guess);

@@ -1,6 +1,6 @@
 #pragma once
 // Internal to the aligner: the optional last step, a point-to-plane ICP from the
-// spectral result (AlignParams::icp_refinement).
+// spectral result (AlignParams::refinement.icp_refinement).
 
 #include <spectral_vs/representation/point_cloud.hpp>
 

@@ -60,7 +60,7 @@ struct ModelAligner::Impl {
   // buffers above, so they run one at a time (guarded by ThreadSanitizer in threads_test).
   mutable std::mutex busy;
 
-  bool local() const { return !params.global_search && params.max_translation > 0.0; }
+  bool local() const { return !params.search.global_search && params.local.max_translation > 0.0; }
 
   Pose pose_of(const Transform& T_scene_model) const {
     return moving_model->pose_of(T_scene_model);
@@ -75,8 +75,8 @@ struct ModelAligner::Impl {
     const std::optional<Eigen::Vector3d> viewpoint = detail::declared_viewpoint(params);
     if (!viewpoint) return fitness_map.fitness(scene, map, points, normals);
     const detail::RangeImage view(scene, *viewpoint,
-                                  0.5 * params.voxel_size);  // as align() makes it
-    return view.check(points, normals, params.voxel_size).fitness();
+                                  0.5 * params.scene.voxel_size);  // as align() makes it
+    return view.check(points, normals, params.scene.voxel_size).fitness();
   }
 
   // The scene's voxels and spectrum on the bounded grid around the model's start; the
@@ -87,12 +87,12 @@ struct ModelAligner::Impl {
                                         at_start.colwise().maxCoeff().transpose());
     // Only the scene points a bounded shift can reach enter the grid (as in align()).
     const Points in_reach =
-        detail::points_in_reach(scene.points(), model_box, params.max_translation);
-    const GridSpec spec =
-        detail::bounded_translation_spec(detail::points_box(in_reach), model_box,
-                                         params.max_translation, params.voxel_size, params.limits);
+        detail::points_in_reach(scene.points(), model_box, params.local.max_translation);
+    const GridSpec spec = detail::bounded_translation_spec(detail::points_box(in_reach), model_box,
+                                                           params.local.max_translation,
+                                                           params.scene.voxel_size, params.limits);
     use_plans(spec);
-    voxelize_into(in_reach, spec, params.occupancy, target, params.limits);
+    voxelize_into(in_reach, spec, params.scene.occupancy, target, params.limits);
     phase->set_target(target);
     return spec;
   }
@@ -123,7 +123,7 @@ struct ModelAligner::Impl {
         : impl_(impl), spec_(spec), target_energy_(grid_energy(impl.target)) {}
     TranslationEstimate estimate(const Points& moved) override {
       const AlignParams& p = impl_.params;
-      voxelize_into(moved, spec_, p.occupancy, impl_.moving, p.limits);
+      voxelize_into(moved, spec_, p.scene.occupancy, impl_.moving, p.limits);
       if (impl_.moving.empty()) fail("initial_guess: the model falls outside the scene's grid");
       return impl_.phase->estimate(impl_.moving, impl_.max_shift);
     }
@@ -143,11 +143,12 @@ struct ModelAligner::Impl {
                   Clock::time_point started) {
     auto t = Clock::now();
     const ShCoefficients scene_coefficients =
-        egi_coefficients(scene, params.bandwidth, params.egi_method);
-    So3Correlation correlation(scene_coefficients, model_coefficients, params.bandwidth, true);
+        egi_coefficients(scene, params.scene.bandwidth, params.scene.egi_method);
+    So3Correlation correlation(scene_coefficients, model_coefficients, params.scene.bandwidth,
+                               true);
     timings.scene_coefficients = seconds_since(t);
     t = Clock::now();
-    const GridSpec map = detail::FitnessMap::spec_of(scene, params.voxel_size, params.limits);
+    const GridSpec map = detail::FitnessMap::spec_of(scene, params.scene.voxel_size, params.limits);
     timings.scene_map = seconds_since(t);
 
     t = Clock::now();
@@ -163,16 +164,16 @@ struct ModelAligner::Impl {
                                          detail::deadline_of(params, started)};
     detail::Algorithm1Timings loop_timings;
     AlignResult result =
-        detail::run_algorithm1(loop, pose, grid, params.max_iterations, &loop_timings);
+        detail::run_algorithm1(loop, pose, grid, params.local.max_iterations, &loop_timings);
     timings.rotation = loop_timings.rotation;
     timings.translation = loop_timings.translation;
     timings.records = loop_timings.records;
     t = Clock::now();
     result.fitness = fitness(scene, map, pose);
-    if (params.verify) {
-      detail::set_verification(
-          result, detail::Verifier(scene, params.voxel_size, detail::declared_viewpoint(params))
-                      .verify(model, result.T_scene_model));
+    if (params.verification.verify) {
+      detail::set_verification(result, detail::Verifier(scene, params.scene.voxel_size,
+                                                        detail::declared_viewpoint(params))
+                                           .verify(model, result.T_scene_model));
     }
     timings.fitness = seconds_since(t);
     return result;
@@ -187,15 +188,16 @@ ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
   Impl& im = *impl_;
   im.model = model;
   im.params = params;
-  if (params.voxel_size == 0.0) im.params.voxel_size = alignment_voxel_size(model, model);
+  if (params.scene.voxel_size == 0.0)
+    im.params.scene.voxel_size = alignment_voxel_size(model, model);
   // A tracker checks a view only when it is declared: 'automatic' is all sides here.
-  if (params.scene_view == SceneView::automatic && !detail::declared_viewpoint(params))
-    im.params.scene_view = SceneView::all_sides;
+  if (params.scene.scene_view == SceneView::automatic && !detail::declared_viewpoint(params))
+    im.params.scene.scene_view = SceneView::all_sides;
   im.moving_model.emplace(model);
-  im.model_coefficients = egi_coefficients(model, params.bandwidth, params.egi_method);
+  im.model_coefficients = egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method);
   if (im.local()) {
-    im.max_shift = Eigen::Vector3i::Constant(
-        detail::voxels_along(params.max_translation, im.params.voxel_size, params.limits));
+    im.max_shift = Eigen::Vector3i::Constant(detail::voxels_along(
+        params.local.max_translation, im.params.scene.voxel_size, params.limits));
   }
 }
 

@@ -19,7 +19,7 @@ constexpr double kPolishLastStep = 0.25 * M_PI / 180.0;
 constexpr int kPolishFirstStepRounds = 5;  // at most 20 degrees walked at the first step
 constexpr double kPolishMinDensity = 2.0;  // model points per occupied voxel
 
-// The ICP refinement of a result (AlignParams::icp_refinement), against the whole scene;
+// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole scene;
 // kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
 constexpr double kIcpFitnessLoss = 0.05;
 // Pairs within a voxel first (the spectral result may be most of one off), then, for a
@@ -39,8 +39,8 @@ std::optional<ShCoefficients> window_coefficients(const SceneMap& scene,
                                 centre + Eigen::Vector3d::Constant(half_width));
   const std::vector<Eigen::Index> rows = scene.points_in(box);
   if (rows.size() < 3) return std::nullopt;
-  return egi_coefficients(detail::rows_of(scene.cloud().normals(), rows), params.bandwidth,
-                          params.egi_method);
+  return egi_coefficients(detail::rows_of(scene.cloud().normals(), rows), params.scene.bandwidth,
+                          params.scene.egi_method);
 }
 
 // Re-places `trial`'s translation by phase correlation in the window; its voxel overlap.
@@ -146,13 +146,14 @@ template <typename Step>
 void polish_result(const Problem& problem, std::optional<TranslationWindow>& window,
                    AlignResult& result, Step step) {
   const Pose start = problem.model.pose_of(result.T_scene_model);
-  if (points_per_voxel(problem.model.move(start), problem.params.voxel_size) < kPolishMinDensity)
+  if (points_per_voxel(problem.model.move(start), problem.params.scene.voxel_size) <
+      kPolishMinDensity)
     return;
   place_window(problem, window, problem.model.centre(start));
   const Pose polished = step(*window, start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
   result.fitness =
-      problem.model.fitness(problem.scene, problem.view, polished, problem.params.voxel_size);
+      problem.model.fitness(problem.scene, problem.view, polished, problem.params.scene.voxel_size);
 }
 
 }  // namespace
@@ -164,8 +165,8 @@ void place_window(const Problem& problem, std::optional<TranslationWindow>& wind
     return;
   }
   window.emplace(problem.scene, problem.model.reach(), problem.margin, centre,
-                 problem.params.voxel_size, problem.params.occupancy, phase_params(problem.params),
-                 problem.params.limits);
+                 problem.params.scene.voxel_size, problem.params.scene.occupancy,
+                 phase_params(problem.params), problem.params.limits);
 }
 
 AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& correlation,
@@ -175,7 +176,7 @@ AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& corr
                                problem.model, problem.params,     problem.deadline};
   AlignResult result = run_algorithm1(loop, pose, source, max_iterations);
   result.fitness =
-      problem.model.fitness(problem.scene, problem.view, pose, problem.params.voxel_size);
+      problem.model.fitness(problem.scene, problem.view, pose, problem.params.scene.voxel_size);
   return result;
 }
 
@@ -189,7 +190,8 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   std::optional<So3Correlation> local_correlation;
   if (local) {
     try {
-      local_correlation.emplace(*local, problem.model_coefficients, problem.params.bandwidth, true);
+      local_correlation.emplace(*local, problem.model_coefficients, problem.params.scene.bandwidth,
+                                true);
     } catch (const std::invalid_argument&) {
       // A window whose normals have no structure (a uniform EGI): keep the scene's.
     }
@@ -197,13 +199,14 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
   const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
   place_window(problem, window, problem.model.centre(hypothesis.pose));
-  AlignResult result = algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose,
-                                               *window, problem.params.refinement_iterations);
+  AlignResult result =
+      algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose, *window,
+                              problem.params.refinement.refinement_iterations);
   result.hypothesis = hypothesis.index;
   // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
   // walk off a right hypothesis: the fitter of the two poses is kept.
   const double start_fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
-                                                     problem.params.voxel_size);
+                                                     problem.params.scene.voxel_size);
   if (start_fitness > result.fitness) {
     // The returned pose is then not where this run ended: it claims no iterations.
     result.T_scene_model = problem.model.transform_of(hypothesis.pose);
@@ -244,7 +247,7 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
   int iterations = 0;
   const int stages = problem.dense_model ? 2 : 1;
   for (int stage = 0; stage < stages; ++stage) {
-    settings.max_distance = (stage == 0 ? 1.0 : kIcpFineDistance) * problem.params.voxel_size;
+    settings.max_distance = (stage == 0 ? 1.0 : kIcpFineDistance) * problem.params.scene.voxel_size;
     const detail::IcpOutcome outcome =
         detail::refine_point_to_plane(model, scene, T_scene_model, settings);
     if (outcome.iterations == 0) break;
@@ -252,8 +255,9 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
     iterations += outcome.iterations;
   }
   if (iterations == 0) return;
-  const double fitness = problem.model.fitness(
-      problem.scene, problem.view, problem.model.pose_of(T_scene_model), problem.params.voxel_size);
+  const double fitness =
+      problem.model.fitness(problem.scene, problem.view, problem.model.pose_of(T_scene_model),
+                            problem.params.scene.voxel_size);
   if (fitness < result.fitness - kIcpFitnessLoss) return;
   result.T_scene_model = T_scene_model;
   result.fitness = fitness;

@@ -31,7 +31,7 @@ class SceneThenWindow : public TranslationSource {
   void follow(const Eigen::Vector3d& centre, const Eigen::Vector3d& step, bool more) override {
     if (on_window_) {
       window_->follow(centre);
-    } else if (problem_.params.max_translation == 0.0 && more &&
+    } else if (problem_.params.local.max_translation == 0.0 && more &&
                step.norm() < 0.5 * problem_.margin) {
       place_window(problem_, window_, centre);  // near: go local
       on_window_ = true;
@@ -72,7 +72,7 @@ void sweep_result_about(const Problem& problem, std::optional<TranslationWindow>
 void polish_result_rotation(const Problem& problem, std::optional<TranslationWindow>& window,
                             AlignResult& result);
 
-/// The ICP refinement of a result (AlignParams::icp_refinement), against the whole
+/// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole
 /// scene; kept unless it loses fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result);

@@ -35,7 +35,7 @@ int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullpt
 /// @throws std::invalid_argument over limits.max_voxels.
 GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const GridLimits& limits);
 
-/// The bounded translation grid (AlignParams::max_translation): per axis the smaller of
+/// The bounded translation grid (AlignParams::local.max_translation): per axis the smaller of
 /// the scene's box and the model's where it starts with max_translation of room past them
 /// (once: the grid is circular), and the model's box grown by max_translation on both
 /// sides (wrap-free for any shift up to max_translation, when the scene's box lies

@@ -57,9 +57,9 @@ std::vector<Eigen::Index> whole_view(const PointCloud& searched) {
 void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
                            std::vector<std::vector<Eigen::Index>>& parts) {
   const AlignParams& params = problem.params;
-  if (!(params.guess_distance > 0.0)) return;
+  if (!(params.search.guess_distance > 0.0)) return;
   const Eigen::Vector3d centre = problem.model.centre(problem.model.pose_of(params.initial_guess));
-  const double reach = params.guess_distance + problem.model.reach();
+  const double reach = params.search.guess_distance + problem.model.reach();
   const auto far = [&](const std::vector<Eigen::Index>& part) {
     for (const Eigen::Index i : part)
       if ((searched.points().row(i).transpose() - centre).norm() <= reach) return false;
@@ -92,8 +92,8 @@ struct SceneSensor {
 };
 
 SceneSensor scene_sensor(const AlignParams& params) {
-  if (params.scene_viewpoint) return {*params.scene_viewpoint, SceneView::single_view};
-  return {params.sensor_origin, params.scene_view};
+  if (params.scene.scene_viewpoint) return {*params.scene.scene_viewpoint, SceneView::single_view};
+  return {params.scene.sensor_origin, params.scene.scene_view};
 }
 
 }  // namespace
@@ -115,9 +115,9 @@ std::optional<RangeImage> single_view_image(const PointCloud& scene, const Align
   const SceneSensor sensor = scene_sensor(params);
   if (sensor.view == SceneView::all_sides) return std::nullopt;
   if (sensor.view == SceneView::automatic &&
-      !detect_single_view(scene, sensor.origin, params.voxel_size).single_view)
+      !detect_single_view(scene, sensor.origin, params.scene.voxel_size).single_view)
     return std::nullopt;
-  return RangeImage(scene, sensor.origin, 0.5 * params.voxel_size);
+  return RangeImage(scene, sensor.origin, 0.5 * params.scene.voxel_size);
 }
 
 }  // namespace detail

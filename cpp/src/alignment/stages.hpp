@@ -82,11 +82,11 @@ inline Eigen::AlignedBox3d box_of(const Points& points) {
                              points.colwise().maxCoeff().transpose());
 }
 
-/// A guess's neighbourhood (AlignParams::guess_angle_deg, guess_distance) is set.
-bool has_neighbourhood(const AlignParams& p);
+/// A guess's neighbourhood (GlobalSearchParams::guess_angle_deg, guess_distance) is set.
+bool has_neighbourhood(const GlobalSearchParams& search);
 
-/// The window's margin around the model (AlignParams::window_margin, or from the voxels),
-/// metres.
+/// The window's margin around the model (GlobalSearchParams::window_margin, or from the
+/// voxels), metres.
 double window_margin(double search_voxel, const AlignParams& params);
 
 /// Places the translation window, made once (its FFT plans are re-used) and moved to

@@ -97,11 +97,11 @@ void check_params(const ViewAlignParams& p) {
 // The settings of align() that Algorithm 1 and the phase correlation read.
 AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
   AlignParams a;
-  a.voxel_size = scale.voxel_size;
-  a.bandwidth = p.bandwidth;
+  a.scene.voxel_size = scale.voxel_size;
+  a.scene.bandwidth = p.bandwidth;
   a.threads = p.threads;
-  a.occupancy = p.occupancy;
-  a.egi_method = p.egi_method;
+  a.scene.occupancy = p.occupancy;
+  a.scene.egi_method = p.egi_method;
   a.limits = p.limits;
   a.max_seconds = p.max_seconds;
   return a;

@@ -23,7 +23,7 @@ enum class RotationStep {
              ///< definite, the gradient law elsewhere: the same fixed point, fewer iterations.
 };
 
-/// What the scene is to its sensor (AlignParams::scene_view).
+/// What the scene is to its sensor (SceneParams::scene_view).
 enum class SceneView {
   automatic,    ///< A single view from sensor_origin if `detect_single_view` finds one
                 ///< (a depth camera's cloud in its own frame), else seen from all sides.
@@ -31,65 +31,16 @@ enum class SceneView {
   all_sides,    ///< Seen from all sides (a full model, a fused map): no view check.
 };
 
-/// Settings of `align`. Defaults are the ones measured best here (docs/experiments.md).
-struct AlignParams {
+/// The scene and its representation (`AlignParams::scene`): the voxel grids, the EGIs and
+/// what the scene is to its sensor. Read by every stage (the voxel is the unit of every
+/// length), and by the scene preparation alone for the sensor and the support plane.
+struct SceneParams {
   /// Voxel edge r of the translation grid, metres; 0: derived from the model by
   /// `alignment_voxel_size` (its typical size / 12, at least its point spacing).
   double voxel_size = 0.0;
-  int bandwidth = 16;             ///< B: EGI harmonics of degree l < B are correlated.
-  double translation_gain = 0.5;  ///< lambda_t in (0, 1]: share of the phase-correlation
-                                  ///< shift applied per iteration (eq. 16).
-  double rotation_gain = 0.5;     ///< lambda_r > 0. Newton: share of the Newton step, in (0, 1].
-                                  ///< Gradient: radians per unit of normalised gradient.
-  RotationStep rotation_step = RotationStep::newton;
-  double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
-  double tolerance = 0.02;          ///< eps_g of eq. (17): stop when |translation step| in voxels
-                                    ///< plus |grad C| (normalised correlation per radian) < eps_g.
-  int max_iterations = 100;         ///< Iterations of Algorithm 1, >= 1 (the paper's mode).
-  /// With global search: iterations of Algorithm 1 per refinement, >= 1. Each starts at a
-  /// verified hypothesis and is then polished and ICP-refined: 20 ended as well as 100
-  /// on every experiment family (docs/experiments.md), where cluttered windows made a
-  /// third of the runs chatter to 100 without converging.
-  int refinement_iterations = 20;
-  /// Time budget of the whole alignment, seconds, >= 0 (0: none). Checked after every
-  /// iteration, hypothesis and refinement: past it, the best pose so far is returned with
-  /// converged = false and stop_reason = max_seconds (the one setting whose result depends
-  /// on the machine's speed).
-  double max_seconds = 0.0;
-  /// T_scene_model to start from. Without global search, Algorithm 1 starts here. With
-  /// it, the guess seeds the search: it is verified and ranked with the search's
-  /// hypotheses, and with a neighbourhood (guess_angle_deg, guess_distance) it is always
-  /// refined and only the hypotheses inside the neighbourhood are kept.
-  Transform initial_guess = Transform::Identity();
-  /// With global search: the largest rotation from initial_guess that is searched,
-  /// degrees, in [0, 180]; 0: no limit.
-  double guess_angle_deg = 0.0;
-  /// With global search: the largest distance of the model's centroid from where
-  /// initial_guess puts it that is searched, metres, >= 0; 0: no limit. With a limit, the
-  /// parts of a cluttered scene farther than this plus the model's reach are not searched.
-  double guess_distance = 0.0;
-  bool global_search = true;  ///< Start from the best rotations of the SO(3) search
-                              ///< (beyond the paper) instead of the initial guess's.
-  int hypotheses = 48;        ///< Rotations of the global search that are placed and verified:
-                              ///< enough to hold the true one among the near-equal maxima of
-                              ///< an object with symmetric faces. Searched per part of a
-                              ///< cluttered scene (see suppress_support_plane): half as many
-                              ///< per part, at least 1.
-  int refinements = 3;        ///< The best-verified hypotheses that Algorithm 1 then runs from,
-                              ///< each in a window of the scene around it; the one with the
-                              ///< best final fitness is kept. In [1, hypotheses].
-  double search_voxel_size = 0.0;  ///< Voxel of the global search's translation grid, metres.
-                                   ///< 0: twice voxel_size, coarser where needed to keep that
-                                   ///< grid under 2^19 voxels (large scenes).
-  double window_margin = 0.0;      ///< How far the model may move per window placement, metres:
-                                   ///< local windows are the model's reach plus this on each side.
-                                   ///< 0: the larger of 5 voxels and 2.5 search voxels.
-  double max_translation = 0.0;    ///< Without global search: the largest translation from the
-                                   ///< initial guess that is sought, metres, per axis. The grid
-                                   ///< then holds the scene and the model's start grown by this
-                                   ///< (not by the model's reach), all iterations run on it, and
-                                   ///< farther phase-correlation peaks are ignored: for two views
-                                   ///< of one scene, as in servoing. 0: unbounded (the paper).
+  int bandwidth = 16;  ///< B: EGI harmonics of degree l < B are correlated, in [2, 64].
+  Occupancy occupancy = Occupancy::trilinear;    ///< Voxel values (the paper: binary).
+  EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
   /// Where the scene's sensor was, scene coordinates, metres: the origin for a depth
   /// camera's cloud in its own frame. Python orients estimated normals toward it.
   Eigen::Vector3d sensor_origin = Eigen::Vector3d::Zero();
@@ -99,7 +50,7 @@ struct AlignParams {
   /// as one part (below). Default: detected (`detect_single_view`).
   SceneView scene_view = SceneView::automatic;
   /// Deprecated, kept for one release (not marked [[deprecated]]: every copy of the
-  /// settings would warn): set means scene_view = single_view from this origin,
+  /// settings would warn): set means scene_view = single_view from this origin (metres),
   /// overriding sensor_origin and scene_view.
   std::optional<Eigen::Vector3d> scene_viewpoint;
   /// With global search: search the scene without its support plane (a plane of one
@@ -110,53 +61,142 @@ struct AlignParams {
   /// or a view of it (at least 30 points, its box diagonal between a quarter of the
   /// model's reach and 4 reaches; the 8 largest) gets its own SO(3) search on its own EGI,
   /// its rotations placed by phase correlation in a window around it (at twice the voxel,
-  /// then at the voxel), from the model's side facing scene_viewpoint if set.
+  /// then at the voxel), from the model's side facing the sensor of a single view.
   bool suppress_support_plane = true;
-  bool polish = true;  ///< With global search: for a model whose EGI has a flat axis
-                       ///< (its smallest autocorrelation curvature under a tenth of the
-                       ///< largest: a mug's axis, its handle a few percent of the
-                       ///< normals), each pose Algorithm 1 ends at is turned to the best
-                       ///< of the turns about that axis every 15 degrees, scored by the
-                       ///< overlap of the model's voxels with the scene's, before the
-                       ///< poses are compared. Without icp_refinement, then a pattern
-                       ///< search on the kept rotation (4 to 1/4 degree steps) for the
-                       ///< same overlap, past the EGI's accuracy floor. Skipped for
-                       ///< models sampled sparser than 2 points per occupied voxel.
-  /// With global search: a point-to-plane ICP from the result (each model point paired
-  /// with its nearest scene point within voxel_size whose normal agrees within 45
-  /// degrees, then, for a model of at least 2 points per occupied voxel, within 0.4
-  /// voxel_size; with scene_viewpoint, the model points facing it only; Gauss-Newton, up
-  /// to 30 steps each), kept unless it lowers fitness by more than 0.05. With
-  /// scene_viewpoint it refines every Algorithm 1 result before they are compared (a
-  /// view's fitness tells a pose from its near-symmetric flip only when both are
-  /// precise), and the kept one after the polish. Not spectral: the one local step, past
-  /// the voxel grid's and the EGI's accuracy (docs/experiments.md measures with and
-  /// without).
+};
+
+/// The local controller, Algorithm 1 (`AlignParams::local`; paper, eq. 16-17): its gains,
+/// its rotation law, its stop rule and its translation grid. Read by every run of
+/// Algorithm 1: the paper's mode, the refinements of the global search, ModelAligner.
+struct LocalParams {
+  double translation_gain = 0.5;  ///< lambda_t in (0, 1]: share of the phase-correlation
+                                  ///< shift applied per iteration (eq. 16), dimensionless.
+  double rotation_gain = 0.5;     ///< lambda_r > 0. Newton: share of the Newton step, in (0, 1].
+                                  ///< Gradient: radians per unit of normalised gradient.
+  RotationStep rotation_step = RotationStep::newton;  ///< The rotation law.
+  double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
+  double tolerance = 0.02;          ///< eps_g of eq. (17): stop when |translation step| in voxels
+                                    ///< plus |grad C| (normalised correlation per radian) < eps_g.
+  int max_iterations = 100;         ///< Iterations of Algorithm 1, >= 1, without global search (the
+                                    ///< paper's mode; the global search's: refinement_iterations).
+  bool subvoxel = true;             ///< Sub-voxel refinement of the phase-correlation peak.
+  double max_translation = 0.0;     ///< Without global search: the largest translation from the
+                                    ///< initial guess that is sought, metres, per axis. The grid
+                                    ///< then holds the scene and the model's start grown by this
+                                    ///< (not by the model's reach), all iterations run on it, and
+                                    ///< farther phase-correlation peaks are ignored: for two views
+                                    ///< of one scene, as in servoing. 0: unbounded (the paper).
+};
+
+/// The global search (`AlignParams::search`; beyond the paper): the SO(3) search, the
+/// placement of its rotations by phase correlation, and the neighbourhood of the initial
+/// guess it is kept to. Read by the hypothesis generation and the choice of the
+/// hypotheses refined; without global_search, by nothing.
+struct GlobalSearchParams {
+  bool global_search = true;  ///< Start from the best rotations of the SO(3) search
+                              ///< (beyond the paper) instead of the initial guess's.
+  int hypotheses = 48;        ///< Rotations of the global search that are placed and verified:
+                              ///< enough to hold the true one among the near-equal maxima of
+                              ///< an object with symmetric faces. Searched per part of a
+                              ///< cluttered scene (see SceneParams::suppress_support_plane):
+                              ///< half as many per part, at least 1. >= 1.
+  int refinements = 3;        ///< The best-verified hypotheses that Algorithm 1 then runs from,
+                              ///< each in a window of the scene around it; the one with the
+                              ///< best final fitness is kept. In [1, hypotheses].
+  double search_voxel_size = 0.0;  ///< Voxel of the global search's translation grid, metres.
+                                   ///< 0: twice voxel_size, coarser where needed to keep that
+                                   ///< grid under 2^19 voxels (large scenes).
+  double window_margin = 0.0;      ///< How far the model may move per window placement, metres:
+                                   ///< local windows are the model's reach plus this on each side.
+                                   ///< 0: the larger of 5 voxels and 2.5 search voxels.
+  /// The largest rotation from initial_guess that is searched, degrees, in [0, 180]; 0: no
+  /// limit. With this or guess_distance, the guess is always refined and only the
+  /// hypotheses inside the neighbourhood are kept.
+  double guess_angle_deg = 0.0;
+  /// The largest distance of the model's centroid from where initial_guess puts it that
+  /// is searched, metres, >= 0; 0: no limit. With a limit, the parts of a cluttered scene
+  /// farther than this plus the model's reach are not searched.
+  double guess_distance = 0.0;
+};
+
+/// The refinement of the global search's hypotheses (`AlignParams::refinement`): Algorithm
+/// 1 from each (with LocalParams' gains), the flat-axis sweep and polish, the ICP. Without
+/// global search, by nothing.
+struct RefinementParams {
+  /// Iterations of Algorithm 1 per refinement, >= 1. Each starts at a verified hypothesis
+  /// and is then polished and ICP-refined: 20 ended as well as 100 on every experiment
+  /// family (docs/experiments.md), where cluttered windows made a third of the runs
+  /// chatter to 100 without converging.
+  int refinement_iterations = 20;
+  bool polish = true;  ///< For a model whose EGI has a flat axis (its smallest
+                       ///< autocorrelation curvature under a tenth of the largest: a
+                       ///< mug's axis, its handle a few percent of the normals), each pose
+                       ///< Algorithm 1 ends at is turned to the best of the turns about
+                       ///< that axis every 15 degrees, scored by the overlap of the model's
+                       ///< voxels with the scene's, before the poses are compared. Without
+                       ///< icp_refinement, then a pattern search on the kept rotation (4 to
+                       ///< 1/4 degree steps) for the same overlap, past the EGI's accuracy
+                       ///< floor. Skipped for models sampled sparser than 2 points per
+                       ///< occupied voxel.
+  /// A point-to-plane ICP from the result (each model point paired with its nearest scene
+  /// point within voxel_size whose normal agrees within 45 degrees, then, for a model of
+  /// at least 2 points per occupied voxel, within 0.4 voxel_size; for a single view, the
+  /// model points facing its sensor only; Gauss-Newton, up to 30 steps each), kept unless
+  /// it lowers fitness by more than 0.05. For a single view it refines every Algorithm 1
+  /// result before they are compared (a view's fitness tells a pose from its
+  /// near-symmetric flip only when both are precise), and the kept one after the polish.
+  /// Not spectral: the one local step, past the voxel grid's and the EGI's accuracy
+  /// (docs/experiments.md measures with and without).
   bool icp_refinement = true;
-  bool subvoxel = true;  ///< Sub-voxel refinement of the phase-correlation peak.
-  Occupancy occupancy = Occupancy::trilinear;    ///< Voxel values (the paper: binary).
-  EgiMethod egi_method = EgiMethod::projection;  ///< How EGI coefficients are formed.
-  int threads = 1;  ///< Threads for FFTW and the SO(3) search, in [1, 256].
-  /// Memory cap: any grid over limits.max_voxels voxels (scene map, translation grids,
-  /// windows) is refused with std::invalid_argument before it is allocated. The largest
-  /// grids cost about 28 bytes per voxel (values, FFT buffers), so the default 2^27 voxels
-  /// bounds one grid at about 3.8 GB.
-  GridLimits limits = {};
-  /// With global search: at most this many alternatives are reported
-  /// (AlignResult::alternatives), in [0, 64]; 0 skips their search (and `ambiguous`).
-  int max_alternatives = 8;
+};
+
+/// What is checked and reported of the result (`AlignParams::verification`): read by the
+/// verifier and the search for alternatives, after the last refinement.
+struct VerificationParams {
   /// Without global search: verify the final pose (verify_pose: AlignResult::confidence,
   /// inliers, inlier_rmse, inlier_distance). Off, those stay 0 and the pose, fitness and
   /// history are the same bit for bit: a tracker that reads only the fitness skips the
   /// check (about 2 ms of a servo step at 320 x 240, docs/servoing.md). With global search
   /// the poses are always verified: the check ranks the alternatives.
   bool verify = true;
+  /// With global search: at most this many alternatives are reported
+  /// (AlignResult::alternatives), in [0, 64]; 0 skips their search (and `ambiguous`).
+  int max_alternatives = 8;
+};
+
+/// Settings of `align`, grouped by the stage they steer (docs/architecture.md shows which
+/// stage reads which group). Defaults are the ones measured best here
+/// (docs/experiments.md). Which groups apply depends on the mode: with
+/// search.global_search (the default) every group; without it (the paper's mode, the
+/// servo's bounded search) scene, local and verification, and not search or refinement.
+struct AlignParams {
+  SceneParams scene;                ///< The scene and its representation.
+  LocalParams local;                ///< Algorithm 1.
+  GlobalSearchParams search;        ///< The global search (with search.global_search).
+  RefinementParams refinement;      ///< Refinement of its hypotheses (with global search).
+  VerificationParams verification;  ///< The check of the result and its alternatives.
+  /// T_scene_model to start from. Without global search, Algorithm 1 starts here. With
+  /// it, the guess seeds the search: it is verified and ranked with the search's
+  /// hypotheses, and with a neighbourhood (search.guess_angle_deg, guess_distance) it is
+  /// always refined and only the hypotheses inside the neighbourhood are kept.
+  Transform initial_guess = Transform::Identity();
+  int threads = 1;  ///< Threads for FFTW and the SO(3) search, in [1, 256].
+  /// Time budget of the whole alignment, seconds, >= 0 (0: none). Checked after every
+  /// iteration, hypothesis and refinement: past it, the best pose so far is returned with
+  /// converged = false and stop_reason = max_seconds (the one setting whose result depends
+  /// on the machine's speed).
+  double max_seconds = 0.0;
+  /// Memory cap: any grid over limits.max_voxels voxels (scene map, translation grids,
+  /// windows) is refused with std::invalid_argument before it is allocated. The largest
+  /// grids cost about 28 bytes per voxel (values, FFT buffers), so the default 2^27 voxels
+  /// bounds one grid at about 3.8 GB.
+  GridLimits limits = {};
 };
 
 /// Why `align` stopped.
 enum class AlignStopReason {
   converged,       ///< The stop rule (eq. 17) held.
-  max_iterations,  ///< AlignParams::max_iterations ran out.
+  max_iterations,  ///< AlignParams::local.max_iterations ran out.
   max_seconds,     ///< AlignParams::max_seconds ran out.
   kept_start,      ///< With global search: Algorithm 1 ended less fit than the hypothesis it
                    ///< started from, and the hypothesis's pose was kept (its run is not
@@ -231,7 +271,7 @@ struct AlignResult {
   double inlier_distance = 0.0;  ///< kInlierVoxels * voxel_size, metres.
   /// With global search: poses apart from this one by more than 5 degrees or 10 mm (and
   /// from each other), whose confidence is within 0.05 of this one's, best first, at most
-  /// AlignParams::max_alternatives.
+  /// AlignParams::verification.max_alternatives.
   std::vector<AlignAlternative> alternatives;
   /// True when there is an alternative: the scene does not tell the pose apart from
   /// another one (a symmetric object, or a view that hides its distinguishing part).
@@ -297,10 +337,10 @@ struct AxisRotationStep {
   double slope = 0.0;      ///< dC/dtheta along the axis at R, per radian.
   double curvature = 0.0;  ///< d2C/dtheta2 along the axis at R, per radian^2.
   bool newton = false;     ///< The Newton step (the correlation is concave along the axis).
-  bool capped = false;     ///< The step was cut to params.max_rotation_step.
+  bool capped = false;     ///< The step was cut to params.local.max_rotation_step.
 };
 
-/// The rotation law of Algorithm 1 (params.rotation_step, rotation_gain and
+/// The rotation law of Algorithm 1 (params.local.rotation_step, rotation_gain and
 /// max_rotation_step, as align() steps) for rotations R exp(theta hat(axis)) only: the
 /// Newton step -gain slope / curvature where the curvature is negative, else the
 /// gradient law gain slope, capped at max_rotation_step. For a turn about one direction

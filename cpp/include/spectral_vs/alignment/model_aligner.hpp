@@ -20,7 +20,7 @@ struct ModelAlignerTimings {
   double translation = 0.0;         ///< The model's voxels and the phase correlation.
   double records = 0.0;             ///< J_t and J_r of the iteration records.
   double fitness = 0.0;             ///< Fitness (the scene's map around the model at its pose)
-                                    ///< of the result, and its verification (AlignParams::verify).
+                                    ///< of the result, and its check (params.verification).
   double total = 0.0;               ///< The whole call.
 };
 

@@ -14,7 +14,7 @@ namespace spectral_vs {
 
 /// Settings of `verify_pose`.
 struct VerifyParams {
-  /// The alignment's voxel edge, metres (AlignParams::voxel_size): the inlier distance is
+  /// The alignment's voxel edge, metres (AlignParams::scene.voxel_size): the inlier distance is
   /// kInlierVoxels of it, the tight distance kTightVoxels.
   double voxel_size = 0.008;
   /// The sensor origin of a single-view scene, scene coordinates, metres: the model
