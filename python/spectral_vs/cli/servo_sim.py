@@ -51,7 +51,7 @@ def add_parser(commands: Any, formatter: Any) -> None:
     )
     servo.add_argument(
         "--set",
-        choices=["moderate", "large", "extreme"],  # the keys of servo.START_SETS
+        choices=["moderate", "large", "extreme"],  # the keys of experiment.START_SETS
         default="moderate",
         help="starts under 0.2 m and 30 deg away (moderate, default), beyond that up to "
         "0.45 m and 60 deg (large), or beyond that up to 0.6 m and 90 deg with at least 30%% "
@@ -136,6 +136,7 @@ def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any)
 
 def run_servo_sim(args: argparse.Namespace) -> int:
     """Servo the simulated arm (--robot) from seeded starts back to the reference pose."""
+    from spectral_vs import experiment
     from spectral_vs import servo as servo_lib
 
     try:
@@ -157,9 +158,9 @@ def run_servo_sim(args: argparse.Namespace) -> int:
         reference = robot.capture()
         T_world_reference = robot.camera_pose()
         home_q = sim_params.robot.home_q
-        spec = servo_lib.START_SETS[args.set]
+        spec = experiment.START_SETS[args.set]
         accept = robot.view_check(spec["min_view_share"]) if "min_view_share" in spec else None
-        starts = servo_lib.start_poses(
+        starts = experiment.start_poses(
             robot.kinematics, args.set, args.starts, args.seed, q_reference=home_q, accept=accept
         )
 
@@ -179,7 +180,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
             robot.reset_joint_positions(q)
             if per_step:
                 print(f"start {index}: camera {1000 * t:.0f} mm and {np.degrees(r):.1f} deg away")
-            recorder = servo_lib.CloudRecorder(robot)
+            recorder = experiment.CloudRecorder(robot)
             log = servo_lib.run_servo(
                 recorder,
                 robot.kinematics,
@@ -225,7 +226,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                 name = "servo.png" if args.starts == 1 else f"servo_{index}.png"
                 path = args.out / name
                 path.parent.mkdir(parents=True, exist_ok=True)
-                servo_lib.plot_servo(
+                plotting.plot_servo(
                     log,
                     T_world_reference,
                     path,
