@@ -101,12 +101,11 @@ def run_faults(start_index: int) -> dict:
         start = peers.starts(robot, "moderate", start_index + 1, 0)[start_index]
         out["start"] = {k: start[k] for k in ("start_mm", "start_deg")} | {"index": start_index}
         for label, (wrap, window) in FAULTS.items():
-            robot.reset_joint_positions(start["q"])
-            faulty = wrap(robot)
-            log = servo_lib.run_servo(
-                faulty,
-                robot.kinematics,
-                servo_lib.SpectralServo(reference, servo_lib.ServoParams()),
+            log, faulty = experiment.servo_from(
+                robot,
+                start["q"],
+                reference,
+                wrap=wrap,
                 dt=peers.DT,
                 max_steps=peers.MAX_STEPS,
                 stop_at_joint_limit=False,
@@ -133,12 +132,11 @@ def run_panda(start_index: int) -> tuple[dict, Any]:
         reference = robot.capture()
         T_reference = robot.camera_pose()
         start = peers.starts(robot, "large", start_index + 1, 0)[start_index]
-        robot.reset_joint_positions(start["q"])
-        recorder = experiment.CloudRecorder(robot)
-        log = servo_lib.run_servo(
-            recorder,
-            robot.kinematics,
-            servo_lib.SpectralServo(reference, servo_lib.ServoParams()),
+        log, recorder = experiment.servo_from(
+            robot,
+            start["q"],
+            reference,
+            wrap=experiment.CloudRecorder,
             dt=peers.DT,
             max_steps=peers.MAX_STEPS,
             stop_at_joint_limit=False,

@@ -22,6 +22,7 @@ from spectral_vs._core import Kinematics, PointCloud
 from spectral_vs.poses import pose_error
 from spectral_vs.robot import RobotInterface
 from spectral_vs.servo.records import ServoLog, ServoRecord, ServoStatus
+from spectral_vs.servo.settings import ServoParams
 
 #: The start-pose sets of the servo experiment (benchmarks/servo_episodes.py) and of
 #: ``spectral-vs servo-sim``: joint perturbation (rad) and the accepted camera displacement
@@ -379,12 +380,39 @@ def true_errors(log: ServoLog, T_base_reference: np.ndarray) -> np.ndarray:
     return np.array(out).reshape(-1, 2)
 
 
+def servo_from(
+    robot: Any,
+    q: np.ndarray,
+    reference: PointCloud,
+    params: ServoParams | None = None,
+    *,
+    wrap: Callable[[Any], Any] | None = None,
+    **run_options: Any,
+) -> tuple[ServoLog, Any]:
+    """One episode of the experiment: put the simulated ``robot`` at the start ``q`` (rad;
+    ``robot.reset_joint_positions``, no motion) and servo its camera back to ``reference``
+    with a fresh :class:`~spectral_vs.servo.SpectralServo` (``params``).
+
+    ``wrap(robot)``, made after the reset, is what the servo drives (a
+    :class:`CloudRecorder`, a fault of :mod:`spectral_vs.sim.faults`); ``run_options`` go
+    to :func:`~spectral_vs.servo.run_servo` (``dt``, ``max_steps``, ...). Returns the log
+    and the driven robot (the wrapper, or ``robot`` itself).
+    """
+    from spectral_vs.servo import SpectralServo, run_servo
+
+    robot.reset_joint_positions(q)
+    driven = robot if wrap is None else wrap(robot)
+    log = run_servo(driven, robot.kinematics, SpectralServo(reference, params), **run_options)
+    return log, driven
+
+
 __all__ = [
     "START_SETS",
     "CloudRecorder",
     "ViewCheck",
     "random_start",
     "record_dict",
+    "servo_from",
     "start_poses",
     "true_errors",
     "view_share",

@@ -481,27 +481,21 @@ def _servo_clouds(
     low, high = np.percentile(ref_points[:, 2], [1, 99])
     for column, (step, name) in enumerate(zip(chosen, names, strict=False)):
         axis = figure.add_subplot(grid[0, column])
-        axis.scatter(
-            ref_points[:, 0],
-            ref_points[:, 1],
-            s=0.4,
-            c=ref_points[:, 2],
-            cmap="Greys_r",
-            vmin=low - 0.1,
-            vmax=high + 0.1,
-            label="reference",
-        )
-        current = subsample(clouds[step])
-        axis.scatter(
-            current[:, 0],
-            current[:, 1],
-            s=0.4,
-            c=current[:, 2],
-            cmap="autumn",
-            vmin=low,
-            vmax=high,
-            label=f"current, step {step}",
-        )
+        # The reference in greys, the current cloud in warm colours, both shaded by depth.
+        for points, cmap, margin, label in (
+            (ref_points, "Greys_r", 0.1, "reference"),
+            (subsample(clouds[step]), "autumn", 0.0, f"current, step {step}"),
+        ):
+            axis.scatter(
+                points[:, 0],
+                points[:, 1],
+                s=0.4,
+                c=points[:, 2],
+                cmap=cmap,
+                vmin=low - margin,
+                vmax=high + margin,
+                label=label,
+            )
         axis.set_title(f"{name} cloud (step {step}) over the reference")
         axis.set_xlabel("x (m, camera frame; colour: depth)")
         axis.set_ylabel("y (m)")

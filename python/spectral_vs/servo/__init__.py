@@ -67,14 +67,14 @@ from spectral_vs.servo.records import (
     _empty_record,  # noqa: F401  (read by the tests)
 )
 from spectral_vs.servo.relocalization import field_share
-from spectral_vs.servo.settings import (
+from spectral_vs.servo.settings import ServoParams
+from spectral_vs.servo.stages import (
     FaultParams,
     LawParams,
     PlaneTurnParams,
     RecoveryParams,
     RegistrationParams,
     RelocalizationParams,
-    ServoParams,
     StopParams,
     WatchdogParams,
 )

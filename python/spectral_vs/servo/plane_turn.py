@@ -16,18 +16,24 @@ from spectral_vs._core import (
     AxisRotationStep,
     PointCloud,
     So3Correlation,
+    dominant_direction,
     egi_coefficients,
     rotation_step_about,
 )
+from spectral_vs._core import dominant_plane as _dominant_plane
 from spectral_vs.poses import rotation_matrix
 from spectral_vs.servo.settings import ServoParams
 
+#: Offset bin of the dominant plane's vote, m: the levelling recovery's distance to the plane
+#: is the middle of the two neighbouring bins with the most points, within 1 mm.
+_PLANE_OFFSET_BIN = 0.001
+
 
 def dominant_normal(normals: np.ndarray, cone: float) -> tuple[np.ndarray, float]:
-    """The dominant direction of unit normals (a table top's normal) and its share.
-
-    Starting from the normals' mean, the direction is replaced a few times by the mean of
-    the normals within ``cone`` of it.
+    """The dominant direction of unit normals (a table top's normal) and its share: the
+    core's :func:`spectral_vs.dominant_direction` (the normal with the most others within
+    10 degrees, then the mean of those), the share being that of the normals within
+    ``cone`` of it.
 
     Parameters
     ----------
@@ -39,40 +45,36 @@ def dominant_normal(normals: np.ndarray, cone: float) -> tuple[np.ndarray, float
     Returns
     -------
     axis : ndarray, shape (3,)
-        The unit direction (``(0, 0, 1)`` for normals that cancel out).
+        The unit direction (``(0, 0, 1)`` for no normals).
     share : float
         Share of the normals within ``cone`` of it, in [0, 1].
     """
     normals = np.asarray(normals, dtype=float).reshape(-1, 3)
-    axis = normals.mean(axis=0) if len(normals) else np.zeros(3)
-    if not np.linalg.norm(axis) > 1e-9:
-        return np.array([0.0, 0.0, 1.0]), 0.0
-    axis = axis / np.linalg.norm(axis)
-    inside = np.zeros(len(normals), dtype=bool)
-    for _ in range(5):
-        inside = normals @ axis > math.cos(cone)
-        if not inside.any():
-            break
-        axis = normals[inside].mean(axis=0)
-        axis = axis / np.linalg.norm(axis)
-    return axis, float(inside.mean())
+    axis, share = dominant_direction(normals, member_cone=cone)
+    return np.asarray(axis, dtype=float), float(share)
 
 
 def dominant_plane(
     points: np.ndarray, normals: np.ndarray, cone: float, min_share: float
 ) -> tuple[np.ndarray, float] | None:
-    """The dominant plane of a view (a table top), camera frame: its unit normal ``n``
-    (:func:`dominant_normal`, turned toward the camera) and the camera's distance to it,
-    ``d`` = -median(n . p) over the points whose normals lie within ``cone`` of ``n``, m;
-    None when fewer than ``min_share`` of the normals do or the camera is not in front of it.
-    """
+    """The dominant plane of a view (a table top), camera frame: the core's
+    :func:`spectral_vs.dominant_plane` with the normals within ``cone`` (rad) of its
+    direction, at any distance from it, and its offset voted in 1 mm bins. Its unit normal
+    ``n`` (toward the camera, as the view's normals are) and the camera's distance to it,
+    ``d`` = -offset, m; None when fewer than ``min_share`` of the normals lie within ``cone``
+    of its direction (:func:`dominant_normal`) or the camera is not in front of it."""
     normals = np.asarray(normals, dtype=float).reshape(-1, 3)
-    axis, share = dominant_normal(normals, cone)
+    _, share = dominant_normal(normals, cone)
     if share < min_share or share == 0.0:
         return None
-    inside = normals @ axis > math.cos(cone)
-    distance = -float(np.median(np.asarray(points, dtype=float).reshape(-1, 3)[inside] @ axis))
-    return (axis, distance) if distance > 0 else None
+    cloud = PointCloud(np.asarray(points, dtype=float).reshape(-1, 3), normals)
+    plane = _dominant_plane(
+        cloud, member_cone=cone, offset_bin=_PLANE_OFFSET_BIN, band=math.inf, min_share=0.0
+    )
+    if plane is None:
+        return None
+    distance = -float(plane.offset)
+    return (np.asarray(plane.normal, dtype=float), distance) if distance > 0 else None
 
 
 def _turn_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
