@@ -52,13 +52,13 @@ class SpectralServo(SensorFaults, Relocalization):
     def __init__(self, reference: CloudLike, params: ServoParams | None = None) -> None:
         self.params = params if params is not None else ServoParams()
         cloud = self._crop(as_cloud(reference, "reference"))
-        if len(cloud) < self.params.min_points:
+        if len(cloud) < self.params.faults.min_points:
             raise ValueError(
                 f"reference has {len(cloud)} points, fewer than min_points = "
-                f"{self.params.min_points}"
+                f"{self.params.faults.min_points}"
             )
         self._align_params = self.params.align_params()
-        self._view_params = ViewAlignParams(**self.params.view_overrides)
+        self._view_params = ViewAlignParams(**self.params.relocalization.view_overrides)
         self.reference = self._prepare(cloud, "reference")
         # What the relocalization registers: the reference as captured, with its normals.
         self._reference_view = cloud if cloud.has_normals else self.reference
@@ -68,12 +68,12 @@ class SpectralServo(SensorFaults, Relocalization):
         self._tracking_aligner: ModelAligner | None = None
         if self.params.uses_tracking():
             tracking = copy.copy(self._align_params)
-            tracking.max_translation = self.params.tracking_translation
+            tracking.max_translation = self.params.registration.tracking_translation
             self._tracking_aligner = ModelAligner(self.reference, tracking)
         self._centroid = np.asarray(self.reference.centroid())
         self._plane_turn: _PlaneTurn | None = (
             _PlaneTurn.of(self._reference_view, self._centroid, self.params, self._align_params)
-            if self.params.plane_turn
+            if self.params.plane.plane_turn
             else None
         )
         reference_points = np.asarray(cloud.points)
@@ -83,8 +83,8 @@ class SpectralServo(SensorFaults, Relocalization):
         self._reference_plane = dominant_plane(
             np.asarray(self._reference_view.points),
             np.asarray(self._reference_view.normals),
-            self.params.plane_cone,
-            self.params.min_plane_share,
+            self.params.plane.plane_cone,
+            self.params.plane.min_plane_share,
         )
         self.reset()
 
@@ -254,7 +254,7 @@ class SpectralServo(SensorFaults, Relocalization):
 
         if self._since_relocalization is not None:
             self._since_relocalization += 1
-        if self.params.relocalize and self._lost and self._relocalization_due():
+        if self.params.relocalization.relocalize and self._lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
             motion = self._motion
         if self._recovering():
@@ -290,7 +290,7 @@ class SpectralServo(SensorFaults, Relocalization):
             # Once locked on, a poor fit may mean the answer lies beyond the tracking bound
             # (the camera or the scene jumped): the full search decides, and the watchdog
             # sees the jump. Before, a poor fit is the relocalization's to judge.
-            tracking = not self._armed or result.fitness >= self.params.watchdog_fitness
+            tracking = not self._armed or result.fitness >= self.params.watchdog.watchdog_fitness
         if not tracking:
             scene, result = self._register(cloud, guess, self._aligner)
         record.tracking = tracking
@@ -302,7 +302,7 @@ class SpectralServo(SensorFaults, Relocalization):
         the record's estimate, errors, fitness, confidence and Algorithm 1's figures."""
         p = self.params
         guess = None
-        if (p.warm_start or self._anchored) and self._previous is not None:
+        if (p.registration.warm_start or self._anchored) and self._previous is not None:
             guess = self._predicted(motion)
         scene, result = self._registration(cloud, record, guess, motion)
         last = result.history[-1] if len(result.history) else None
@@ -316,17 +316,17 @@ class SpectralServo(SensorFaults, Relocalization):
             self._anchored
             and not self._armed
             and guess is not None
-            and record.fitness < p.watchdog_fitness
+            and record.fitness < p.watchdog.watchdog_fitness
         )
         T = np.asarray(result.T_scene_model)
         # The plane turn is of the estimate the step keeps, and of the confidence's pose
         # under its threshold: a carried step with a confident fit uses neither.
-        if not record.carried or record.fitness < p.relocalize_fitness:
+        if not record.carried or record.fitness < p.relocalization.relocalize_fitness:
             T = self._turned(cloud, scene, T)
         # fitness / share >= fitness: the share is needed only under the threshold.
         record.confidence = (
             min(1.0, record.fitness)
-            if record.fitness >= p.relocalize_fitness
+            if record.fitness >= p.relocalization.relocalize_fitness
             else self._confidence(T, record.fitness, cloud)
         )
         if record.carried:
@@ -351,11 +351,11 @@ class SpectralServo(SensorFaults, Relocalization):
         visible_fitness = record.fitness / max(1.0 - hidden, 1e-9)
         if jump is not None:
             return f"with an occluder, {jump}"
-        if visible_fitness < self.params.watchdog_fitness:
+        if visible_fitness < self.params.watchdog.watchdog_fitness:
             return (
                 f"with an occluder hiding {100 * hidden:.0f}% of the reference, the "
                 f"fitness over the rest is {visible_fitness:.3f} (watchdog_fitness "
-                f"{self.params.watchdog_fitness})"
+                f"{self.params.watchdog.watchdog_fitness})"
             )
         return None
 
@@ -365,8 +365,8 @@ class SpectralServo(SensorFaults, Relocalization):
         self._previous = T
         self._motion = np.eye(4)
         self._outage_start = now
-        self._armed = self._armed or record.fitness >= self.params.watchdog_fitness
-        self._lost = not record.confidence >= self.params.relocalize_fitness
+        self._armed = self._armed or record.fitness >= self.params.watchdog.watchdog_fitness
+        self._lost = not record.confidence >= self.params.relocalization.relocalize_fitness
         if record.relocalized:
             self._confirmed = not self._lost
         if not self._lost:
@@ -396,30 +396,30 @@ class SpectralServo(SensorFaults, Relocalization):
         start = np.eye(4) if guess is None else np.asarray(guess, dtype=float)
         c = self._centroid
         moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
-        return bool(np.abs(moved).max() <= 0.5 * self.params.tracking_translation)
+        return bool(np.abs(moved).max() <= 0.5 * self.params.registration.tracking_translation)
 
     def _converged(self, record: ServoRecord) -> bool:
         p = self.params
-        if record.fitness < p.min_fitness:
+        if record.fitness < p.stop.min_fitness:
             return False
         if (
-            record.translation_error < p.translation_tolerance
-            and record.rotation_error < p.rotation_tolerance
+            record.translation_error < p.stop.translation_tolerance
+            and record.rotation_error < p.stop.rotation_tolerance
         ):
             return True
         eq17 = record.translation_step + record.rotation_gradient
-        return p.step_tolerance > 0 and bool(eq17 < p.step_tolerance)
+        return p.stop.step_tolerance > 0 and bool(eq17 < p.stop.step_tolerance)
 
     def _held(self, record: ServoRecord) -> bool:
         """Whether a converged servo stays so: its estimate has not been outside the
         re-engage bounds for ``reengage_steps`` steps in a row."""
         p = self.params
         inside = (
-            record.translation_error <= p.reengage_translation
-            and record.rotation_error <= p.reengage_rotation
+            record.translation_error <= p.stop.reengage_translation
+            and record.rotation_error <= p.stop.reengage_rotation
         )
         self._outside = 0 if inside else self._outside + 1
-        return self._outside < p.reengage_steps
+        return self._outside < p.stop.reengage_steps
 
     def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
         """A message when ``T`` is implausibly far from the previous estimate carried along
@@ -430,11 +430,11 @@ class SpectralServo(SensorFaults, Relocalization):
         # |translation| of predicted^-1 T is |t - t_predicted|: the two parts are independent.
         moved, turned = pose_error(_rigid_inverse(predicted) @ T)
         p = self.params
-        if moved > p.jump_limit_translation or turned > p.jump_limit_rotation:
+        if moved > p.watchdog.jump_limit_translation or turned > p.watchdog.jump_limit_rotation:
             return (
                 f"the estimate changed by {1000 * moved:.1f} mm and {math.degrees(turned):.2f} "
-                f"deg in one step (limits {1000 * p.jump_limit_translation:.1f} mm, "
-                f"{math.degrees(p.jump_limit_rotation):.2f} deg)"
+                f"deg in one step (limits {1000 * p.watchdog.jump_limit_translation:.1f} mm, "
+                f"{math.degrees(p.watchdog.jump_limit_rotation):.2f} deg)"
             )
         return None
 

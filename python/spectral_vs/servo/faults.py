@@ -40,9 +40,9 @@ class SensorFaults(ControllerState):
         """``(hold, message)`` when the frame cannot be used (too few of its ``points``
         within ``max_depth``, or a stale frame), else None."""
         p = self.params
-        if points == 0 or points < p.min_points:
+        if points == 0 or points < p.faults.min_points:
             hold = "empty_cloud" if points == 0 else "too_few_points"
-            return hold, f"the current cloud has {points} points (min_points {p.min_points})"
+            return hold, f"the current cloud has {points} points (min_points {p.faults.min_points})"
         stale = self._stale(raw, stamp)
         return None if stale is None else ("stale_frame", stale)
 
@@ -55,14 +55,16 @@ class SensorFaults(ControllerState):
         step holds). Runs once locked on; fills ``record.occluded_points`` and
         ``record.hidden_share``."""
         p = self.params
-        if not (self._armed and self._previous is not None and math.isfinite(p.occlusion_margin)):
+        if not (
+            self._armed and self._previous is not None and math.isfinite(p.faults.occlusion_margin)
+        ):
             return cloud, False, 0.0, None
         points = len(cloud)
         mask, hidden = near_occluders(
             np.asarray(cloud.points),
             self._occlusion_reference,
             self._predicted(motion),
-            p.occlusion_margin,
+            p.faults.occlusion_margin,
         )
         record.occluded_points = int(mask.sum())
         record.hidden_share = hidden
@@ -74,11 +76,11 @@ class SensorFaults(ControllerState):
             np.asarray(cloud.points)[keep],
             None if normals is None else np.asarray(normals)[keep],
         )
-        occluded = record.occluded_points >= p.occlusion_min_share * points
-        if len(cloud) < p.min_points:
+        occluded = record.occluded_points >= p.faults.occlusion_min_share * points
+        if len(cloud) < p.faults.min_points:
             message = (
                 f"{len(cloud)} points remain without {record.occluded_points} "
-                f"occluding ones (min_points {p.min_points})"
+                f"occluding ones (min_points {p.faults.min_points})"
             )
             return cloud, occluded, hidden, message
         return cloud, occluded, hidden, None
@@ -143,7 +145,7 @@ class SensorFaults(ControllerState):
         outage = now - self._outage_start
         record.hold, record.outage = hold, outage
         record.twist = np.zeros(6)
-        limit = self.params.max_outage
+        limit = self.params.faults.max_outage
         if limit == 0 or outage > limit + _CLOCK_TOLERANCE:
             record.status = ServoStatus(
                 "stopped",

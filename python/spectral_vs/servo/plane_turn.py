@@ -131,13 +131,13 @@ class _PlaneTurn:
         """The turn's reference side from the reference's normals (the cloud as captured,
         cropped), or None when the reference has no dominant plane."""
         normals = np.asarray(reference.normals)
-        axis, share = dominant_normal(normals, params.plane_cone)
-        cos_cone = math.cos(params.plane_cone)
-        sampled = normals[:: params.plane_turn_stride]
+        axis, share = dominant_normal(normals, params.plane.plane_cone)
+        cos_cone = math.cos(params.plane.plane_cone)
+        sampled = normals[:: params.plane.plane_turn_stride]
         off = sampled[sampled @ axis <= cos_cone]
-        if share < params.min_plane_share or len(off) < _MIN_OFF_PLANE:
+        if share < params.plane.min_plane_share or len(off) < _MIN_OFF_PLANE:
             return None
-        bandwidth = max(params.plane_turn_bandwidth, params.bandwidth)
+        bandwidth = max(params.plane.plane_turn_bandwidth, params.registration.bandwidth)
         coefficients = np.asarray(egi_coefficients(off, bandwidth))
         law = copy.copy(law)
         law.rotation_gain = 1.0
@@ -159,19 +159,19 @@ class _PlaneTurn:
         """
         R = T_scene_model[:3, :3]
         expected = R @ self.axis  # where the estimate puts the plane's normal in the view
-        sampled = normals[:: self.params.plane_turn_stride]
+        sampled = normals[:: self.params.plane.plane_turn_stride]
         off = sampled[sampled @ expected <= self.cos_cone]
         if len(off) < _MIN_OFF_PLANE or len(off) == len(sampled):
             return 0.0
         plane = np.ones(len(sampled)) @ sampled - off.sum(axis=0)  # sum of the in-cone normals
-        if plane @ expected < math.cos(self.params.plane_turn_tilt) * np.linalg.norm(plane):
+        if plane @ expected < math.cos(self.params.plane.plane_turn_tilt) * np.linalg.norm(plane):
             return 0.0  # the tilt is still off: the turn would be measured about a wrong axis
         fine = egi_coefficients(off, self.bandwidth)
-        coarse_count = self.params.bandwidth**2  # degrees < B come first
+        coarse_count = self.params.registration.bandwidth**2  # degrees < B come first
         coarse = self._step(fine[:coarse_count], self.coefficients[:coarse_count], R)
         if not coarse.newton or coarse.capped:
             return coarse.turn
-        if self.bandwidth > self.params.bandwidth:
+        if self.bandwidth > self.params.registration.bandwidth:
             sharp = self._step(fine, self.coefficients, R)
             if sharp.newton and not sharp.capped:
                 return sharp.turn

@@ -79,18 +79,23 @@ class Relocalization(ControllerState):
         if since is None:
             return True
         if self._confirmed:
-            return since >= p.relocalize_interval
+            return since >= p.relocalization.relocalize_interval
         if self._recovering():
-            return since >= p.relocalize_retry
-        growth = p.relocalize_backoff ** max(0, self._unconfirmed - 1)
-        return since >= min(p.relocalize_interval, p.relocalize_retry * growth)
+            return since >= p.relocalization.relocalize_retry
+        growth = p.relocalization.relocalize_backoff ** max(0, self._unconfirmed - 1)
+        return since >= min(
+            p.relocalization.relocalize_interval, p.relocalization.relocalize_retry * growth
+        )
 
     def _confidence(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
         """``fitness`` over the share of the reference that ``T`` puts inside the field of
         ``cloud`` (its points' bounds in x/z and y/z, nearer than ``max_depth``; at least
         ``_MIN_FIELD_SHARE``), in [0, 1]."""
         share = field_share(
-            self._occlusion_reference, T, np.asarray(cloud.points), self.params.max_depth
+            self._occlusion_reference,
+            T,
+            np.asarray(cloud.points),
+            self.params.registration.max_depth,
         )
         # An estimate that puts the reference out of the field is not trusted for fitting
         # the little it leaves in view.
@@ -113,7 +118,11 @@ class Relocalization(ControllerState):
         record.relocalization_prior = prior is not None and result.hypothesis == -1
         # While recovering the view widens step by step: a marginal score in the middle
         # of it is worth waiting out (a 17-degree wrong pose scored 0.061 there).
-        least = self.params.recover_score if self._recovering() else self.params.relocalize_score
+        least = (
+            self.params.recovery.recover_score
+            if self._recovering()
+            else self.params.relocalization.relocalize_score
+        )
         if result.support.score < least:
             self._failed_relocalizations += 1
             return
@@ -129,10 +138,10 @@ class Relocalization(ControllerState):
         was taken yet and the last ``recover_after`` ones stayed under the score."""
         p = self.params
         return (
-            p.relocalize
-            and p.recover_after > 0
+            p.relocalization.relocalize
+            and p.recovery.recover_after > 0
             and not self._anchored
-            and self._failed_relocalizations >= p.recover_after
+            and self._failed_relocalizations >= p.recovery.recover_after
         )
 
     def _recover(
@@ -149,12 +158,12 @@ class Relocalization(ControllerState):
         p = self.params
         self._recovery_steps += 1
         self._outage_start = now  # the frame was usable: no sensor outage
-        if self._recovery_steps > p.recover_steps:
+        if self._recovery_steps > p.recovery.recover_steps:
             record.status = ServoStatus(
                 "stopped",
                 "lost",
-                f"no relocalization reached recover_score {p.recover_score:g} within "
-                f"{p.recover_steps} recovery steps (last score "
+                f"no relocalization reached recover_score {p.recovery.recover_score:g} within "
+                f"{p.recovery.recover_steps} recovery steps (last score "
                 f"{record.relocalization_score:.3f})",
             )
             record.seconds = time.perf_counter() - start
@@ -167,7 +176,7 @@ class Relocalization(ControllerState):
             if self._T_motion_backoff is None:
                 self._T_motion_backoff = motion.copy()
             T = np.eye(4)
-            T[2, 3] = -p.recover_standoff
+            T[2, 3] = -p.recovery.recover_standoff
             T = _rigid_inverse(motion) @ self._T_motion_backoff @ T
             record.recovery = "back_off"
         record.T_current_desired = T
@@ -185,12 +194,12 @@ class Relocalization(ControllerState):
             return None
         p = self.params
         source = cloud if cloud.has_normals else self._prepare(cloud, "current")
-        stride = p.plane_turn_stride
+        stride = p.plane.plane_turn_stride
         current = dominant_plane(
             np.asarray(source.points)[::stride],
             np.asarray(source.normals)[::stride],
-            p.plane_cone,
-            p.min_plane_share,
+            p.plane.plane_cone,
+            p.plane.min_plane_share,
         )
         if current is None:
             return None
@@ -199,5 +208,5 @@ class Relocalization(ControllerState):
         T = np.eye(4)
         T[:3, :3] = _turn_between(n_reference, n_current)
         # The target origin t lies at n.t + d_current from the plane.
-        T[:3, 3] = n_current * (d_reference + p.recover_standoff - d_current)
+        T[:3, 3] = n_current * (d_reference + p.recovery.recover_standoff - d_current)
         return T

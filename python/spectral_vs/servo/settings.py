@@ -119,29 +119,34 @@ class ServoParams:
     def uses_tracking(self) -> bool:
         """True when the locked-on registration uses ``tracking_translation``."""
         bounded = self.align_params().max_translation > 0
-        return bounded and 0 < self.tracking_translation < self.max_translation
+        return (
+            bounded
+            and 0 < self.registration.tracking_translation < self.registration.max_translation
+        )
 
     def align_params(self) -> AlignParams:
         """The :class:`AlignParams` of one registration in this mode."""
         params = AlignParams()
-        params.voxel_size = self.voxel_size
-        params.bandwidth = self.bandwidth
-        params.max_rotation_step = self.max_rotation_step
+        params.voxel_size = self.registration.voxel_size
+        params.bandwidth = self.registration.bandwidth
+        params.max_rotation_step = self.registration.max_rotation_step
         params.initial_guess = np.eye(4)
         # The servo reads only the fitness: no pose verification (2 ms per step).
         params.verify = False
-        unbounded = self.mode == "pose" and self.global_search
-        params.max_translation = 0.0 if unbounded else self.max_translation
-        if self.mode == "iteration":
+        unbounded = self.registration.mode == "pose" and self.registration.global_search
+        params.max_translation = 0.0 if unbounded else self.registration.max_translation
+        if self.registration.mode == "iteration":
             params.global_search = False
             params.max_iterations = 1
             params.translation_gain = 1.0
             params.rotation_gain = 1.0
         else:
-            params.global_search = self.global_search
-            params.max_iterations = self.max_iterations
-            params.refinement_iterations = self.max_iterations  # the global search's runs
-        for name, value in self.align_overrides.items():
+            params.global_search = self.registration.global_search
+            params.max_iterations = self.registration.max_iterations
+            params.refinement_iterations = (
+                self.registration.max_iterations
+            )  # the global search's runs
+        for name, value in self.registration.align_overrides.items():
             _check_keys({name: value}, "align_overrides", AlignParams)
             setattr(params, name, value)
         return params

@@ -53,21 +53,25 @@ class ControllerState:
 
     def _crop(self, cloud: PointCloud) -> PointCloud:
         """The points within ``max_depth`` of the camera (along its optical axis)."""
-        if not math.isfinite(self.params.max_depth) or len(cloud) == 0:
+        if not math.isfinite(self.params.registration.max_depth) or len(cloud) == 0:
             return cloud
         points = np.asarray(cloud.points)
-        if points[:, 2].max() <= self.params.max_depth:  # the usual case, without a mask
+        if (
+            points[:, 2].max() <= self.params.registration.max_depth
+        ):  # the usual case, without a mask
             return cloud
-        return cloud.select(points[:, 2] <= self.params.max_depth)  # copied in the core
+        return cloud.select(
+            points[:, 2] <= self.params.registration.max_depth
+        )  # copied in the core
 
     def _prepare(self, cloud: PointCloud, argument: str) -> PointCloud:
         """The cloud downsampled to ``downsample_size``, with normals."""
-        size = self.params.downsample_size or self.params.voxel_size / 2
+        size = self.params.registration.downsample_size or self.params.registration.voxel_size / 2
         try:
             cloud = voxel_downsample(cloud, size) if len(cloud) else cloud
         except ValueError as error:
             raise ValueError(f"{argument}: downsampling to {size} m: {error}") from error
-        return prepare(cloud, argument, self.params.voxel_size, False, (0, 0, 0))
+        return prepare(cloud, argument, self.params.registration.voxel_size, False, (0, 0, 0))
 
     def _predicted(self, motion: np.ndarray | None) -> np.ndarray:
         """The previous (last accepted) estimate carried along the camera's motion since
@@ -95,4 +99,4 @@ class ControllerState:
             The factor in (0, 1] that was applied.
         """
         T = np.asarray(T_current_desired, dtype=float)
-        return _saturated_twist(T[:3, 3], rotation_vector(T[:3, :3]), self.params)
+        return _saturated_twist(T[:3, 3], rotation_vector(T[:3, :3]), self.params.law)
