@@ -35,19 +35,17 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from spectral_vs._core import PointCloud
+from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
 from spectral_vs.registration import as_cloud
-from spectral_vs.servo import (
+from spectral_vs.servo.law import _saturated_twist
+from spectral_vs.servo.records import (
     ServoRecord,
     ServoStatus,
-    _check_positive,
     _converged_status,
     _empty_record,
-    _saturated_twist,
     _too_few_points,
-    pose_error,
-    rotation_matrix,
-    rotation_vector,
 )
+from spectral_vs.servo.stages import _check_positive
 
 InteractionKind = Literal["current", "desired", "mean"]
 RegistrationMethod = Literal["icp", "fpfh"]

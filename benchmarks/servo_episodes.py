@@ -13,7 +13,7 @@ servo has locked on:
 * ``outage for good``: ``Outage(2.0, inf)``, the camera lost: the servo must stop.
 
 Panda (``docs/figures/servo_panda.png``): the Panda preset from large start
-``--panda-start`` (seed 0), the layout of the paper's Fig. 6 (``servo.plot_servo``); and
+``--panda-start`` (seed 0), the layout of the paper's Fig. 6 (``plotting.plot_servo``); and
 both presets at home seen from beside the table (``docs/figures/servo_robots.png``).
 
 Writes ``benchmarks/results/servo_episodes.json`` (per run: how it ended, the final
@@ -38,8 +38,9 @@ from typing import Any
 import numpy as np
 import servo_peers as peers
 
+from spectral_vs import experiment, sim
 from spectral_vs import servo as servo_lib
-from spectral_vs import sim
+from spectral_vs.plotting import plot_servo
 from spectral_vs.sim import faults
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,7 +77,7 @@ FAULTS: dict[str, tuple[Any, tuple[float, float] | None]] = {
 
 def record(log: servo_lib.ServoLog, robot: sim.PyBulletRobot, T_reference: np.ndarray) -> dict:
     t, r = servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_reference)
-    errors = servo_lib.true_errors(log, T_reference)
+    errors = experiment.true_errors(log, T_reference)
     return {
         "reason": log.reason,
         "message": log.status.message,
@@ -100,12 +101,11 @@ def run_faults(start_index: int) -> dict:
         start = peers.starts(robot, "moderate", start_index + 1, 0)[start_index]
         out["start"] = {k: start[k] for k in ("start_mm", "start_deg")} | {"index": start_index}
         for label, (wrap, window) in FAULTS.items():
-            robot.reset_joint_positions(start["q"])
-            faulty = wrap(robot)
-            log = servo_lib.run_servo(
-                faulty,
-                robot.kinematics,
-                servo_lib.SpectralServo(reference, servo_lib.ServoParams()),
+            log, faulty = experiment.servo_from(
+                robot,
+                start["q"],
+                reference,
+                wrap=wrap,
                 dt=peers.DT,
                 max_steps=peers.MAX_STEPS,
                 stop_at_joint_limit=False,
@@ -132,12 +132,11 @@ def run_panda(start_index: int) -> tuple[dict, Any]:
         reference = robot.capture()
         T_reference = robot.camera_pose()
         start = peers.starts(robot, "large", start_index + 1, 0)[start_index]
-        robot.reset_joint_positions(start["q"])
-        recorder = servo_lib.CloudRecorder(robot)
-        log = servo_lib.run_servo(
-            recorder,
-            robot.kinematics,
-            servo_lib.SpectralServo(reference, servo_lib.ServoParams()),
+        log, recorder = experiment.servo_from(
+            robot,
+            start["q"],
+            reference,
+            wrap=experiment.CloudRecorder,
             dt=peers.DT,
             max_steps=peers.MAX_STEPS,
             stop_at_joint_limit=False,
@@ -147,7 +146,7 @@ def run_panda(start_index: int) -> tuple[dict, Any]:
         }
         print(f"panda large #{start_index}: {row['reason']} {row['final_mm']:.2f} mm", flush=True)
         path = FIGURES / "servo_panda.png"
-        servo_lib.plot_servo(
+        plot_servo(
             log,
             T_reference,
             path,

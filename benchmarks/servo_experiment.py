@@ -31,6 +31,7 @@ Needs pybullet and matplotlib.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -46,14 +47,15 @@ import numpy as np
 import report as report_lib
 
 import spectral_vs as svs
+from spectral_vs import experiment, sim
 from spectral_vs import servo as servo_lib
-from spectral_vs import sim
+from spectral_vs.plotting import plot_servo
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results" / "servo.json"
 FIGURES = ROOT / "docs" / "figures"
 
-SETS = servo_lib.START_SETS  # joint perturbation and accepted camera displacement
+SETS = experiment.START_SETS  # joint perturbation and accepted camera displacement
 DEFAULT_SETS = ("moderate", "large")  # the runs of docs/servoing.md
 #: The estimates compared: label -> ServoParams fields.
 MODES: dict[str, dict[str, Any]] = {
@@ -97,6 +99,15 @@ def sim_params() -> sim.SimParams:
     )
 
 
+def flat_settings(params: servo_lib.ServoParams) -> dict[str, Any]:
+    """Every setting of ``params`` by its flat name (the groups' fields)."""
+    return {
+        item.name: getattr(params, item.name)
+        for group in dataclasses.fields(params)
+        for item in dataclasses.fields(getattr(params, group.name))
+    }
+
+
 def loop_settings() -> dict[str, Any]:
     """The loop's settings and the success test, for the results' record."""
     return {
@@ -118,11 +129,11 @@ def start_check(robot: sim.PyBulletRobot, name: str) -> Any:
 def starts(
     kinematics: svs.Kinematics, name: str, count: int, seed: int, accept: Any = None
 ) -> list[dict]:
-    """``count`` seeded start configurations of a set (``servo.start_poses``; ``accept``:
+    """``count`` seeded start configurations of a set (``experiment.start_poses``; ``accept``:
     :func:`start_check`)."""
     return [
         {"q": q.tolist(), "start_mm": 1000 * t, "start_deg": math.degrees(r)}
-        for q, t, r in servo_lib.start_poses(kinematics, name, count, seed, accept=accept)
+        for q, t, r in experiment.start_poses(kinematics, name, count, seed, accept=accept)
     ]
 
 
@@ -151,7 +162,7 @@ def servo_run(
         stop_at_joint_limit=False,  # let the arm slide along a limit with the other joints
     )
     t, r = servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
-    errors = servo_lib.true_errors(log, T_world_reference)
+    errors = experiment.true_errors(log, T_world_reference)
     row = {
         "start_mm": start["start_mm"],
         "start_deg": start["start_deg"],
@@ -176,7 +187,7 @@ def run_episode(
     mode: str,
     keep_clouds: bool,
 ) -> tuple[dict, servo_lib.ServoLog, list[np.ndarray]]:
-    recorder = servo_lib.CloudRecorder(robot) if keep_clouds else None
+    recorder = experiment.CloudRecorder(robot) if keep_clouds else None
     servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams(**MODES[mode]))
     common, log = servo_run(robot, start, servo, T_world_reference, recorder)
     row = {"mode": mode} | common
@@ -467,8 +478,8 @@ def main() -> None:
             "sets": {k: SETS[k] for k in sets},
             "servo_params": {
                 k: v
-                for k, v in servo_lib.ServoParams().__dict__.items()
-                if k not in ("mode", "align_overrides")
+                for k, v in flat_settings(servo_lib.ServoParams()).items()
+                if k not in ("mode", "align_overrides", "view_overrides")
             },
         },
         "runtime_s": time.perf_counter() - started,
@@ -494,7 +505,7 @@ def write_figures(results: dict) -> None:
 def draw_episodes(episodes: dict, reference: svs.PointCloud, T_world_reference: Any) -> None:
     FIGURES.mkdir(parents=True, exist_ok=True)
     for figure, (name, log, clouds) in episodes.items():
-        servo_lib.plot_servo(
+        plot_servo(
             log,
             T_world_reference,
             FIGURES / figure,

@@ -7,7 +7,7 @@ The loop is that of ``spectral-vs servo-sim`` (docs/servoing.md): the robot pres
 images, the reference captured at the robot's home, control period 0.1 s, at most 150
 steps, a joint at its limit clamped while the others carry on; success: the final camera
 pose (PyBullet's link state) within 5 mm and 1 degree of the reference pose. Start sets:
-``servo.START_SETS`` drawn by ``servo.start_poses`` with the command's seed and start
+``experiment.START_SETS`` drawn by ``experiment.start_poses`` with the command's seed and start
 check, so start ``i`` of a set, robot and seed is the start ``i`` of ``servo-sim`` and of
 every controller here (the report checks the joints match).
 
@@ -63,8 +63,8 @@ import peer_servos
 import report as report_lib
 from report import BENCHMARKS_DOC, replace_block
 
+from spectral_vs import experiment, sim
 from spectral_vs import servo as servo_lib
-from spectral_vs import sim
 
 # Open3D is imported later (peer_servos.open3d_module); its thread count is fixed then.
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one thread, like ours
@@ -77,7 +77,7 @@ FIGURES = ROOT / "docs" / "figures"
 SERVOING_DOC = ROOT / "docs" / "servoing.md"
 
 ROBOTS = ("iiwa", "panda")
-SETS = tuple(servo_lib.START_SETS)  # moderate, large, extreme
+SETS = tuple(experiment.START_SETS)  # moderate, large, extreme
 DT = 0.1  # control period, s (servo-sim's default)
 MAX_STEPS = 150  # servo-sim's default
 SUCCESS_MM = 5.0
@@ -145,11 +145,11 @@ def sim_params(robot: str) -> sim.SimParams:
 
 def starts(robot: sim.PyBulletRobot, name: str, count: int, seed: int) -> list[dict]:
     """The ``count`` seeded starts of set ``name``, as ``spectral-vs servo-sim`` draws them."""
-    spec = servo_lib.START_SETS[name]
+    spec = experiment.START_SETS[name]
     accept = robot.view_check(spec["min_view_share"]) if "min_view_share" in spec else None
     return [
         {"q": q.tolist(), "start_mm": 1000 * t, "start_deg": math.degrees(r)}
-        for q, t, r in servo_lib.start_poses(
+        for q, t, r in experiment.start_poses(
             robot.kinematics,
             name,
             count,
@@ -181,7 +181,7 @@ def run_one(
         stop_at_joint_limit=False,  # servo-sim's default: slide along a limit
     )
     t, r = servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
-    errors = servo_lib.true_errors(log, T_world_reference)
+    errors = experiment.true_errors(log, T_world_reference)
     success = bool(1000 * t < SUCCESS_MM and math.degrees(r) < SUCCESS_DEG)
     return {
         "controller": label,

@@ -4,7 +4,7 @@
 
 The simulated scene of ``spectral-vs servo-sim``: the reference is captured at
 ``sim.HOME_Q``, then the camera's depth image at a few moderate start poses (the first
-starts of ``servo.start_poses``) and at joints 0.3, 0.1, 0.03 and 0.01 of the way from the
+starts of ``experiment.start_poses``) and at joints 0.3, 0.1, 0.03 and 0.01 of the way from the
 reference to each (``WAY``: a converging run spends most steps near the reference).
 Every view is processed ``--repeats`` times; each stage is timed with
 ``time.process_time`` (CPU time of the process, single thread) and the median over views
@@ -72,7 +72,7 @@ import numpy as np
 import report as report_lib
 
 import spectral_vs as svs
-from spectral_vs import _core, sim
+from spectral_vs import _core, experiment, sim
 from spectral_vs import servo as servo_lib
 from spectral_vs.registration import prepare
 
@@ -190,7 +190,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     views: list[tuple[str, np.ndarray]] = []
     with sim.PyBulletRobot(sim.SimParams()) as robot:
         reference_depth = robot.capture_depth()
-        starts = servo_lib.start_poses(robot.kinematics, "moderate", args.starts, args.seed)
+        starts = experiment.start_poses(robot.kinematics, "moderate", args.starts, args.seed)
         home = np.asarray(sim.HOME_Q)
         for index, (q, _, _) in enumerate(starts):
             # The start, then the joints part of the way back (WAY).
@@ -328,7 +328,7 @@ def closed_loop(set_name: str, count: int, seed: int) -> dict[str, Any]:
     with sim.PyBulletRobot(sim.SimParams()) as robot:
         reference = robot.capture()
         T_world_reference = robot.camera_pose()
-        starts = servo_lib.start_poses(robot.kinematics, set_name, count, seed)
+        starts = experiment.start_poses(robot.kinematics, set_name, count, seed)
         for q, _, _ in starts:
             robot.reset_joint_positions(q)
             servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams())
@@ -390,7 +390,7 @@ def verification_cost(calls: int = 60) -> dict[str, float]:
         reference = robot.capture()
         home = np.asarray(robot.joint_positions())
         views = []
-        for q, _, _ in servo_lib.start_poses(robot.kinematics, "moderate", 2, 0):
+        for q, _, _ in experiment.start_poses(robot.kinematics, "moderate", 2, 0):
             robot.reset_joint_positions(home + 0.03 * (np.asarray(q) - home))
             views.append(robot.capture())
     servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams())

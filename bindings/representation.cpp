@@ -3,6 +3,7 @@
 #include "conversions.hpp"
 
 #include <spectral_vs/representation/cloud_io.hpp>
+#include <spectral_vs/representation/dominant_plane.hpp>
 #include <spectral_vs/representation/egi.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
@@ -175,6 +176,69 @@ drop_non_finite : bool
       },
       py::arg("path"), py::arg("cloud"), py::arg("encoding") = "binary_compressed",
       "Save to .pcd (encoding: ascii, binary, binary_compressed) or .ply, as float32.");
+
+  py::class_<DominantPlane>(m, "DominantPlane",
+                            "A dominant plane (dominant_plane): n . x = offset on it.")
+      .def_readonly("normal", &DominantPlane::normal, "Unit normal, the side its normals face.")
+      .def_readonly("offset", &DominantPlane::offset, "Offset along the normal, m.")
+      .def_readonly("count", &DominantPlane::count, "Points on the plane.")
+      .def_readonly("share", &DominantPlane::share, "count over the cloud's points, [0, 1].")
+      .def_readonly("extent", &DominantPlane::extent,
+                    "Diagonal of the bounding box of its points, m.")
+      .def("__repr__", [](const DominantPlane& p) {
+        std::ostringstream out;
+        out << "DominantPlane(normal=[" << p.normal.x() << ", " << p.normal.y() << ", "
+            << p.normal.z() << "], offset=" << p.offset << ", count=" << p.count
+            << ", share=" << p.share << ", extent=" << p.extent << ")";
+        return out.str();
+      });
+
+  const PlaneDetectionParams plane_defaults;
+  auto plane_params = [](double direction_cone, double member_cone, double offset_bin,
+                         double band, double min_share) {
+    PlaneDetectionParams params;
+    params.direction_cone = direction_cone;
+    params.member_cone = member_cone;
+    params.offset_bin = offset_bin;
+    params.band = band;
+    params.min_share = min_share;
+    return params;
+  };
+  m.def(
+      "dominant_direction",
+      [plane_params, plane_defaults](const py::handle& normals, double direction_cone,
+                                     double member_cone) {
+        const Points n = to_points(normals, "normals");
+        const PlaneDetectionParams params =
+            plane_params(direction_cone, member_cone, plane_defaults.offset_bin,
+                         plane_defaults.band, plane_defaults.min_share);
+        py::gil_scoped_release release;
+        const DominantDirection d = dominant_direction(n, params);
+        return std::make_pair(d.axis, d.share);
+      },
+      py::arg("normals"), py::arg("direction_cone") = plane_defaults.direction_cone,
+      py::arg("member_cone") = plane_defaults.member_cone,
+      "The most common direction of unit normals (N, 3), by voting: the normal with the most\n"
+      "others within direction_cone (rad), then the mean of those; and the share of the\n"
+      "normals within member_cone (rad) of it. (axis, share); ((0, 0, 1), 0) for no normals.");
+  m.def(
+      "dominant_plane",
+      [plane_params](const PointCloud& cloud, double direction_cone, double member_cone,
+                     double offset_bin, double band, double min_share) {
+        const PlaneDetectionParams params =
+            plane_params(direction_cone, member_cone, offset_bin, band, min_share);
+        py::gil_scoped_release release;
+        return dominant_plane(cloud, params);
+      },
+      py::arg("cloud"), py::arg("direction_cone") = plane_defaults.direction_cone,
+      py::arg("member_cone") = plane_defaults.member_cone,
+      py::arg("offset_bin") = plane_defaults.offset_bin, py::arg("band") = plane_defaults.band,
+      py::arg("min_share") = plane_defaults.min_share,
+      "The dominant plane of a cloud with normals (a table top), by voting: the dominant\n"
+      "direction (dominant_direction), then the most common offset along it in bins of\n"
+      "offset_bin (m); its points have normals within member_cone (rad) and lie within band\n"
+      "(m; inf: any distance). None when fewer than min_share of the points lie on it.\n"
+      "The support plane the aligner removes from a cluttered scene is this plane.");
 
   m.def("voxel_downsample", &voxel_downsample, py::arg("cloud"), py::arg("voxel_size"),
         py::call_guard<py::gil_scoped_release>(),

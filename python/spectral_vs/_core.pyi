@@ -68,6 +68,34 @@ class CloudFileInfo:
 def load_cloud_with_info(path: _Path) -> tuple[PointCloud, CloudFileInfo]: ...
 def load_organized(path: _Path) -> _Array: ...  # (height, width, 3), NaN: no return
 def save_cloud(path: _Path, cloud: PointCloud, encoding: str = "binary_compressed") -> None: ...
+
+class DominantPlane:
+    """A dominant plane (dominant_plane): n . x = offset on it."""
+
+    @property
+    def normal(self) -> _Array: ...  # (3,), unit
+    @property
+    def offset(self) -> float: ...  # m
+    @property
+    def count(self) -> int: ...
+    @property
+    def share(self) -> float: ...  # [0, 1]
+    @property
+    def extent(self) -> float: ...  # m
+
+def dominant_direction(
+    normals: npt.ArrayLike,
+    direction_cone: float = 0.17453292519943295,  # 10 degrees
+    member_cone: float = 0.3490658503988659,  # 20 degrees
+) -> tuple[_Array, float]: ...
+def dominant_plane(
+    cloud: PointCloud,
+    direction_cone: float = 0.17453292519943295,
+    member_cone: float = 0.3490658503988659,
+    offset_bin: float = 0.01,
+    band: float = 0.015,
+    min_share: float = 0.2,
+) -> DominantPlane | None: ...
 def voxel_downsample(cloud: PointCloud, voxel_size: float) -> PointCloud: ...
 def estimate_normals(
     cloud: PointCloud,

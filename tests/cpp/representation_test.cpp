@@ -1,4 +1,5 @@
 #include <spectral_vs/representation/cloud_io.hpp>
+#include <spectral_vs/representation/dominant_plane.hpp>
 #include <spectral_vs/representation/egi.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
@@ -6,6 +7,8 @@
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
 
 #include <array>
 #include <cmath>
@@ -367,3 +370,69 @@ TEST(Egi, RefusesBadBandwidthAndEmptyInput) {
 
 }  // namespace
 }  // namespace spectral_vs
+
+namespace {
+
+/// A plane n . x = d (`count` points in a 0.6 m square about its foot, normals n, noisy
+/// by `noise` m along n) and `clutter` points with random unit normals in a 0.6 m cube.
+spectral_vs::PointCloud plane_with_clutter(const Eigen::Vector3d& n, double d, int count,
+                                           int clutter, double noise, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> side(-0.3, 0.3);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  const Eigen::Vector3d u = n.unitOrthogonal(), v = n.cross(u);
+  spectral_vs::Points points(count + clutter, 3), normals(count + clutter, 3);
+  for (int i = 0; i < count; ++i) {
+    points.row(i) = (d * n + side(rng) * u + side(rng) * v + noise * gauss(rng) * n).transpose();
+    normals.row(i) = n.transpose();
+  }
+  for (int i = count; i < count + clutter; ++i) {
+    points.row(i) = Eigen::Vector3d(side(rng), side(rng), side(rng)).transpose();
+    normals.row(i) = Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)).normalized().transpose();
+  }
+  return spectral_vs::PointCloud(points, normals);
+}
+
+}  // namespace
+
+TEST(DominantPlane, FindsAPlaneWithKnownNormalAndOffsetInClutter) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.2, -0.3, 1.0).normalized();
+  const spectral_vs::PointCloud cloud = plane_with_clutter(n, 0.55, 3000, 1000, 0.0, 7);
+  spectral_vs::PlaneDetectionParams params;
+  params.offset_bin = 0.001;
+  params.band = 0.002;
+  const auto plane = spectral_vs::dominant_plane(cloud, params);
+  ASSERT_TRUE(plane.has_value());
+  // The mean of the plane's exact normals and of the few clutter normals within 10 degrees
+  // (0.8% of 1000): about 1e-4 rad off.
+  EXPECT_LT(plane->normal.cross(n).norm(), 1e-3);
+  EXPECT_NEAR(plane->offset, 0.55, 0.001);                           // within a bin
+  // The 3000 plane points, and the few clutter points in the band and the cone.
+  EXPECT_GE(plane->count, 3000u);
+  EXPECT_LT(plane->count, 3020u);
+  EXPECT_NEAR(plane->share, double(plane->count) / 4000.0, 1e-12);
+  // The axis-aligned box of the square's points (no clutter point reaches the plane).
+  Eigen::AlignedBox3d box;
+  for (int i = 0; i < 3000; ++i) box.extend(cloud.points().row(i).transpose());
+  EXPECT_NEAR(plane->extent, box.sizes().norm(), 1e-9);
+  const auto direction = spectral_vs::dominant_direction(cloud.normals(), params);
+  EXPECT_LT(direction.axis.cross(n).norm(), 1e-3);
+  // 3000 of 4000, and the clutter normals within 20 degrees: (1 - cos 20 deg) / 2 of them.
+  EXPECT_NEAR(direction.share, 0.75 + 0.25 * (1 - std::cos(20.0 * M_PI / 180.0)) / 2, 0.01);
+}
+
+TEST(DominantPlane, NoisyPlaneWithinTheBandAndNoneBelowTheShare) {
+  const Eigen::Vector3d n(0.0, 0.0, -1.0);
+  const spectral_vs::PointCloud cloud = plane_with_clutter(n, -0.8, 2000, 2000, 0.001, 3);
+  spectral_vs::PlaneDetectionParams params;  // 1 cm bins, 1.5 cm band
+  const auto plane = spectral_vs::dominant_plane(cloud, params);
+  ASSERT_TRUE(plane.has_value());
+  EXPECT_NEAR(plane->offset, -0.8, 0.01);
+  EXPECT_NEAR(plane->share, 0.5, 0.02);
+  params.min_share = 0.6;
+  EXPECT_FALSE(spectral_vs::dominant_plane(cloud, params).has_value());
+  params.min_share = 1.5;
+  EXPECT_THROW(spectral_vs::dominant_plane(cloud, params), std::invalid_argument);
+  EXPECT_THROW(spectral_vs::dominant_plane(spectral_vs::PointCloud(cloud.points())),
+               std::invalid_argument);  // no normals
+}

@@ -243,3 +243,31 @@ def test_select_keeps_the_masked_rows_in_order():
     assert len(cloud.select(np.zeros(5000, dtype=bool))) == 0
     with pytest.raises(ValueError, match="one entry per point"):
         cloud.select(keep[:-1])
+
+
+def test_dominant_plane_finds_a_table_under_clutter():
+    """A plane 0.55 m along (0.2, -0.3, 1) under 1000 clutter points with random normals:
+    its normal within 0.1 degree, its offset within a 1 mm bin, its share 3000/4000 (and
+    the few clutter points on it); None when it must hold 90% of the points."""
+    rng = np.random.default_rng(5)
+    n = np.array([0.2, -0.3, 1.0]) / np.linalg.norm([0.2, -0.3, 1.0])
+    u = np.cross(n, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    a, b = rng.uniform(-0.3, 0.3, (2, 3000, 1))
+    plane = 0.55 * n + a * u + b * v
+    clutter = rng.uniform(-0.3, 0.3, (1000, 3))
+    normals = np.vstack([np.tile(n, (3000, 1)), rng.normal(size=(1000, 3))])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]  # unit, as the cloud stores them
+    cloud = svs.PointCloud(np.vstack([plane, clutter]), normals)
+    found = svs.dominant_plane(cloud, offset_bin=0.001, band=0.002)
+    assert found is not None
+    assert np.degrees(np.arccos(min(1.0, float(found.normal @ n)))) < 0.1
+    assert found.offset == pytest.approx(0.55, abs=0.001)
+    assert 3000 <= found.count < 3020 and found.share == pytest.approx(found.count / 4000)
+    axis, share = svs.dominant_direction(normals)
+    assert np.degrees(np.arccos(min(1.0, float(axis @ n)))) < 0.1
+    assert share == pytest.approx(0.75 + 0.25 * (1 - np.cos(np.radians(20))) / 2, abs=0.01)
+    assert svs.dominant_plane(cloud, offset_bin=0.001, band=0.002, min_share=0.9) is None
+    with pytest.raises(ValueError, match="offset_bin must be finite and > 0 m"):
+        svs.dominant_plane(cloud, offset_bin=0.0)

@@ -166,7 +166,7 @@ def test_params_are_checked():
         ServoParams(max_linear_speed=float("nan"))
     with pytest.raises(ValueError, match="min_fitness"):
         ServoParams(min_fitness=1.5)
-    with pytest.raises(ValueError, match="align_overrides"):
+    with pytest.raises(TypeError, match=r"align_overrides.*'no_such_setting'"):
         ServoParams(align_overrides={"no_such_setting": 1}).align_params()
     with pytest.raises(ValueError, match="min_points"):
         SpectralServo(np.zeros((10, 3)), ServoParams(min_points=500))

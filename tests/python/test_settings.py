@@ -209,3 +209,23 @@ def test_the_deprecated_alias_works_in_its_group_too():
         scene.scene_viewpoint = (0.1, 0.0, 0.0)
     assert scene.scene_view == "single_view"
     assert "scene_viewpoint" not in repr(scene)
+
+
+def test_servo_params_groups_and_flat_names_are_one_setting():
+    from spectral_vs.servo import FaultParams, RegistrationParams
+
+    flat = svs.ServoParams(voxel_size=0.01, max_outage=0.3)
+    grouped = svs.ServoParams(
+        registration=RegistrationParams(voxel_size=0.01), faults=FaultParams(max_outage=0.3)
+    )
+    assert flat == grouped and flat.faults.max_outage == 0.3 and flat.voxel_size == 0.01
+    flat.max_outage = 0.4  # written through to the group
+    assert flat.faults.max_outage == 0.4 and flat != grouped
+    assert grouped.faults.max_outage == 0.3  # groups are not shared between settings
+    assert "max_outage=0.3," in repr(grouped) and "faults=FaultParams(" in repr(grouped)
+    with pytest.raises(TypeError, match=r"view_overrides.*'hypothesis'"):
+        svs.ServoParams(view_overrides={"hypothesis": 3})
+    with pytest.raises(TypeError, match=r"align_overrides.*'voxelsize'"):
+        svs.ServoParams(align_overrides={"voxelsize": 0.01})
+    with pytest.raises(AttributeError, match="no setting 'colour'"):
+        flat.colour = 1

@@ -1,6 +1,7 @@
 #include "alignment/scene_map.hpp"
 
 #include "common/checks.hpp"
+#include "spectral_vs/representation/dominant_plane.hpp"
 
 #include <algorithm>
 #include <array>
@@ -383,96 +384,36 @@ double SceneTranslation::translation_cost() const {
 
 namespace {
 
-// The most common of the scene's normal directions, to within about 10 degrees: the
-// normal with the most others within 10 degrees, over a subsample, then their mean.
-Eigen::Vector3d common_direction(const Points& normals) {
-  const Eigen::Index n = normals.rows();
-  const Eigen::Index stride = std::max<Eigen::Index>(1, n / 400);
-  const double near = std::cos(10.0 * M_PI / 180.0);
-  Eigen::Index best = 0, best_votes = -1;
-  for (Eigen::Index i = 0; i < n; i += stride) {
-    Eigen::Index votes = 0;
-    for (Eigen::Index j = 0; j < n; j += stride) votes += normals.row(i).dot(normals.row(j)) > near;
-    if (votes > best_votes) {
-      best_votes = votes;
-      best = i;
-    }
-  }
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  for (Eigen::Index j = 0; j < n; ++j) {
-    if (normals.row(best).dot(normals.row(j)) > near) sum += normals.row(j).transpose();
-  }
-  return sum.normalized();
-}
-
-}  // namespace
-
-namespace {
-
-// The points within 1.5 voxels of the plane whose normals are within 20 degrees of its.
-std::vector<char> on_plane(const PointCloud& scene, const SupportPlane& plane, double voxel_size) {
-  const double parallel = std::cos(20.0 * M_PI / 180.0);
-  std::vector<char> on(std::size_t(scene.size()), 0);
-  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
-    on[std::size_t(i)] =
-        std::abs(scene.normals().row(i).dot(plane.normal)) > parallel &&
-        std::abs(scene.points().row(i).dot(plane.normal) - plane.offset) < 1.5 * voxel_size;
-  }
-  return on;
+// The support plane's detection: the most common normal direction to within 10 degrees,
+// the plane's normals within 20 degrees of it, its offset voted in voxel bins, its points
+// within 1.5 voxels of it and more than a fifth of the scene's.
+PlaneDetectionParams support_plane_params(double voxel_size) {
+  PlaneDetectionParams params;
+  params.direction_cone = 10.0 * M_PI / 180.0;
+  params.member_cone = 20.0 * M_PI / 180.0;
+  params.offset_bin = voxel_size;
+  params.band = 1.5 * voxel_size;
+  params.min_share = 0.2;
+  return params;
 }
 
 }  // namespace
 
 std::optional<SupportPlane> support_plane(const PointCloud& scene, double voxel_size,
                                           double min_extent) {
-  const Points& p = scene.points();
-  const Points& n = scene.normals();
-  const Eigen::Vector3d axis = common_direction(n);
-  const double parallel = std::cos(20.0 * M_PI / 180.0);
-  // Votes for the plane's offset along the axis, in voxel bins.
-  std::vector<std::pair<long, Eigen::Index>> offsets;
-  for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    if (n.row(i).dot(axis) > parallel)
-      offsets.emplace_back(std::lround(p.row(i).dot(axis) / voxel_size), i);
-  }
-  if (offsets.empty()) return std::nullopt;
-  std::sort(offsets.begin(), offsets.end());
-  long best_bin = 0;
-  std::size_t best_votes = 0;
-  for (std::size_t i = 0; i < offsets.size();) {
-    std::size_t j = i;
-    while (j < offsets.size() && offsets[j].first == offsets[i].first) ++j;
-    // A bin and its neighbours: a plane's offsets straddle bin edges.
-    std::size_t votes = j - i;
-    for (std::size_t k = j; k < offsets.size() && offsets[k].first == offsets[i].first + 1; ++k)
-      ++votes;
-    if (votes > best_votes) {
-      best_votes = votes;
-      best_bin = offsets[i].first;
-    }
-    i = j;
-  }
-  SupportPlane plane{axis, (double(best_bin) + 0.5) * voxel_size};
-  const std::vector<char> on = on_plane(scene, plane, voxel_size);
-  Eigen::AlignedBox3d extent;
-  std::size_t count = 0;
-  for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    if (on[std::size_t(i)]) {
-      extent.extend(p.row(i).transpose());
-      ++count;
-    }
-  }
-  if (5 * count < std::size_t(p.rows()) || count == std::size_t(p.rows()) ||
-      extent.sizes().norm() < min_extent) {
-    return std::nullopt;
-  }
-  return plane;
+  const std::optional<DominantPlane> plane =
+      dominant_plane(scene, support_plane_params(voxel_size));
+  if (!plane || plane->count == scene.size() || plane->extent < min_extent) return std::nullopt;
+  return SupportPlane{plane->normal, plane->offset};
 }
 
 PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent) {
   const std::optional<SupportPlane> plane = support_plane(scene, voxel_size, min_extent);
   if (!plane) return scene;
-  const std::vector<char> on = on_plane(scene, *plane, voxel_size);
+  DominantPlane found;
+  found.normal = plane->normal;
+  found.offset = plane->offset;
+  const std::vector<char> on = plane_members(scene, found, support_plane_params(voxel_size));
   const auto kept = Eigen::Index(std::count(on.begin(), on.end(), 0));
   Points kept_points(kept, 3), kept_normals(kept, 3);
   Eigen::Index row = 0;

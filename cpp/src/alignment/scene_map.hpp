@@ -176,9 +176,9 @@ std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, dou
 
 /// The scene without its support plane: the largest plane of points with one normal
 /// direction, if it is wider than `min_extent` metres and holds more than a fifth of the
-/// points (a table under the objects); the scene itself otherwise. The plane is found by
-/// voting, deterministically: the most common normal direction, then the most common
-/// offset along it (bins of `voxel_size`).
+/// points (a table under the objects); the scene itself otherwise. The plane is
+/// `spectral_vs::dominant_plane` (voting, deterministic: the most common normal direction,
+/// then the most common offset along it, in bins of `voxel_size`).
 PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent);
 
 /// The plane `without_support_plane` removes: unit normal, the mean of its points' normals

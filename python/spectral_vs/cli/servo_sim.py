@@ -51,7 +51,7 @@ def add_parser(commands: Any, formatter: Any) -> None:
     )
     servo.add_argument(
         "--set",
-        choices=["moderate", "large", "extreme"],  # the keys of servo.START_SETS
+        choices=["moderate", "large", "extreme"],  # the keys of experiment.START_SETS
         default="moderate",
         help="starts under 0.2 m and 30 deg away (moderate, default), beyond that up to "
         "0.45 m and 60 deg (large), or beyond that up to 0.6 m and 90 deg with at least 30%% "
@@ -136,6 +136,7 @@ def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any)
 
 def run_servo_sim(args: argparse.Namespace) -> int:
     """Servo the simulated arm (--robot) from seeded starts back to the reference pose."""
+    from spectral_vs import experiment
     from spectral_vs import servo as servo_lib
 
     try:
@@ -151,91 +152,155 @@ def run_servo_sim(args: argparse.Namespace) -> int:
     )
     params = servo_lib.ServoParams(mode=args.mode, warm_start=args.warm_start)
     talk = not (args.json or args.quiet)
-    per_step = talk and args.starts == 1
     runs: list[dict[str, Any]] = []
     with sim.PyBulletRobot(sim_params) as robot:
         reference = robot.capture()
         T_world_reference = robot.camera_pose()
-        home_q = sim_params.robot.home_q
-        spec = servo_lib.START_SETS[args.set]
+        spec = experiment.START_SETS[args.set]
         accept = robot.view_check(spec["min_view_share"]) if "min_view_share" in spec else None
-        starts = servo_lib.start_poses(
-            robot.kinematics, args.set, args.starts, args.seed, q_reference=home_q, accept=accept
+        starts = experiment.start_poses(
+            robot.kinematics,
+            args.set,
+            args.starts,
+            args.seed,
+            q_reference=sim_params.robot.home_q,
+            accept=accept,
         )
-
-        def progress(record: servo_lib.ServoRecord) -> None:
-            print(_servo_step_line(record, T_world_reference, servo_lib), flush=True)
-
         if talk:
-            warm = ", warm-started" if args.warm_start else ""
-            print(
-                f"{args.robot}: reference captured at home ({len(reference)} points); "
-                f"{_count(args.starts, 'start')} of the {args.set} set (seed {args.seed}); "
-                f"'{args.mode}' estimate{warm}, {args.sim_mode} simulation"
-                f"{', depth noise' if args.noise else ''}, control period {args.dt:g} s, "
-                f"{args.max_steps} steps max"
-            )
+            _print_setup(args, len(reference))
         for index, (q, t, r) in enumerate(starts):
-            robot.reset_joint_positions(q)
-            if per_step:
-                print(f"start {index}: camera {1000 * t:.0f} mm and {np.degrees(r):.1f} deg away")
-            recorder = servo_lib.CloudRecorder(robot)
-            log = servo_lib.run_servo(
-                recorder,
-                robot.kinematics,
-                servo_lib.SpectralServo(reference, params),
-                dt=args.dt,
-                max_steps=args.max_steps,
-                stop_at_joint_limit=args.stop_at_joint_limits,
-                callback=progress if per_step else None,
+            log, recorder = _servo_start(
+                args, robot, reference, T_world_reference, params, index, (q, t, r)
             )
-            final_t, final_r = servo_lib.pose_error(
-                np.linalg.inv(robot.camera_pose()) @ T_world_reference
-            )
-            run: dict[str, Any] = {
-                "index": index,
-                "start_mm": 1000 * t,
-                "start_deg": float(np.degrees(r)),
-                "final_mm": 1000 * final_t,
-                "final_deg": float(np.degrees(final_r)),
-                "steps": len(log.records),
-                "reason": log.reason,
-                "success": bool(
-                    1000 * final_t < MAX_SERVO_ERROR_MM
-                    and np.degrees(final_r) < MAX_SERVO_ERROR_DEG
-                ),
-                "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
-                "servo_step_cpu_ms": [
-                    round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")
-                ],
-                "wall_s": log.wall_seconds,
-                "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
-                "relocalizations": int(sum(r.relocalized for r in log.records)),
-            }
+            run = _run_summary(args, robot, log, T_world_reference, index, t, r)
             runs.append(run)
             if talk:
-                print(
-                    f"start {index}: {run['start_mm']:.0f} mm {run['start_deg']:.1f} deg -> "
-                    f"{log.reason} after {_count(run['steps'], 'step')}; final error "
-                    f"{run['final_mm']:.2f} mm, {run['final_deg']:.3f} deg "
-                    f"({'ok' if run['success'] else 'TOO LARGE'}), {log.wall_seconds:.1f} s wall",
-                    flush=True,
-                )
+                _print_run(run, log)
             if plotting is not None:
-                name = "servo.png" if args.starts == 1 else f"servo_{index}.png"
-                path = args.out / name
-                path.parent.mkdir(parents=True, exist_ok=True)
-                servo_lib.plot_servo(
-                    log,
-                    T_world_reference,
-                    path,
-                    reference=reference,
-                    clouds=dict(enumerate(recorder.clouds)),
-                    title=f"servo-sim: {args.robot}, {args.set} start {index}, seed {args.seed}, "
-                    f"'{args.mode}' estimate",
-                )
-                if talk:
-                    print(f"wrote {path}")
+                _plot_run(args, plotting, log, T_world_reference, reference, recorder, index)
+    return _report(args, runs, talk)
+
+
+def _print_setup(args: argparse.Namespace, points: int) -> None:
+    """The run's first line: robot, reference, starts, estimate, simulation, budget."""
+    warm = ", warm-started" if args.warm_start else ""
+    print(
+        f"{args.robot}: reference captured at home ({points} points); "
+        f"{_count(args.starts, 'start')} of the {args.set} set (seed {args.seed}); "
+        f"'{args.mode}' estimate{warm}, {args.sim_mode} simulation"
+        f"{', depth noise' if args.noise else ''}, control period {args.dt:g} s, "
+        f"{args.max_steps} steps max"
+    )
+
+
+def _servo_start(
+    args: argparse.Namespace,
+    robot: Any,
+    reference: Any,
+    T_world_reference: np.ndarray,
+    params: Any,
+    index: int,
+    start: tuple[np.ndarray, float, float],
+) -> tuple[Any, Any]:
+    """Servo back from start ``index`` (``q``, ``t`` m and ``r`` rad away from the
+    reference pose), printing every step when there is one start: the log and the cloud
+    recorder."""
+    from spectral_vs import experiment
+    from spectral_vs import servo as servo_lib
+
+    q, t, r = start
+    per_step = not (args.json or args.quiet) and args.starts == 1
+    if per_step:
+        print(f"start {index}: camera {1000 * t:.0f} mm and {np.degrees(r):.1f} deg away")
+
+    def progress(record: servo_lib.ServoRecord) -> None:
+        print(_servo_step_line(record, T_world_reference, servo_lib), flush=True)
+
+    return experiment.servo_from(
+        robot,
+        q,
+        reference,
+        params,
+        wrap=experiment.CloudRecorder,
+        dt=args.dt,
+        max_steps=args.max_steps,
+        stop_at_joint_limit=args.stop_at_joint_limits,
+        callback=progress if per_step else None,
+    )
+
+
+def _run_summary(
+    args: argparse.Namespace,
+    robot: Any,
+    log: Any,
+    T_world_reference: np.ndarray,
+    index: int,
+    t: float,
+    r: float,
+) -> dict[str, Any]:
+    """The JSON entry of one start: its distance, final error, steps, reason, success and
+    step times."""
+    from spectral_vs.poses import pose_error
+
+    final_t, final_r = pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
+    return {
+        "index": index,
+        "start_mm": 1000 * t,
+        "start_deg": float(np.degrees(r)),
+        "final_mm": 1000 * final_t,
+        "final_deg": float(np.degrees(final_r)),
+        "steps": len(log.records),
+        "reason": log.reason,
+        "success": bool(
+            1000 * final_t < MAX_SERVO_ERROR_MM and np.degrees(final_r) < MAX_SERVO_ERROR_DEG
+        ),
+        "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
+        "servo_step_cpu_ms": [round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")],
+        "wall_s": log.wall_seconds,
+        "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
+        "relocalizations": int(sum(r.relocalized for r in log.records)),
+    }
+
+
+def _print_run(run: dict[str, Any], log: Any) -> None:
+    """One line per start: where it started, how it ended, the final error."""
+    print(
+        f"start {run['index']}: {run['start_mm']:.0f} mm {run['start_deg']:.1f} deg -> "
+        f"{log.reason} after {_count(run['steps'], 'step')}; final error "
+        f"{run['final_mm']:.2f} mm, {run['final_deg']:.3f} deg "
+        f"({'ok' if run['success'] else 'TOO LARGE'}), {log.wall_seconds:.1f} s wall",
+        flush=True,
+    )
+
+
+def _plot_run(
+    args: argparse.Namespace,
+    plotting: Any,
+    log: Any,
+    T_world_reference: np.ndarray,
+    reference: Any,
+    recorder: Any,
+    index: int,
+) -> None:
+    """``servo.png`` (``servo_<index>.png`` for several starts) in ``--out``."""
+    name = "servo.png" if args.starts == 1 else f"servo_{index}.png"
+    path = args.out / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    plotting.plot_servo(
+        log,
+        T_world_reference,
+        path,
+        reference=reference,
+        clouds=dict(enumerate(recorder.clouds)),
+        title=f"servo-sim: {args.robot}, {args.set} start {index}, seed {args.seed}, "
+        f"'{args.mode}' estimate",
+    )
+    if not (args.json or args.quiet):
+        print(f"wrote {path}")
+
+
+def _report(args: argparse.Namespace, runs: list[dict[str, Any]], talk: bool) -> int:
+    """The summary (JSON or a line) and the exit code: 1 when a start ended too far."""
     successes = sum(run["success"] for run in runs)
     if args.json:
         summary = {

@@ -414,7 +414,7 @@ def sim_view_pairs(
 ) -> list[ViewPair]:
     """``count`` rendered pairs of the simulated table: the wrist camera's view at the
     home pose (reference) and at the seeded start poses of
-    :func:`spectral_vs.servo.start_poses` (current).
+    :func:`spectral_vs.experiment.start_poses` (current).
 
     The ground truth is ``T_current_reference = inv(T_world_current) T_world_reference``
     from the simulation's camera poses; both views are in their camera frames with normals
@@ -425,7 +425,7 @@ def sim_view_pairs(
     count : int
         Number of pairs, >= 1.
     start_set : str
-        A key of ``spectral_vs.servo.START_SETS`` (``"moderate"`` or ``"large"``).
+        A key of ``spectral_vs.experiment.START_SETS`` (``"moderate"`` or ``"large"``).
     seed : int
         Seed of the start poses.
     min_view_share : float
@@ -447,7 +447,7 @@ def sim_view_pairs(
         Without PyBullet.
     """
     from spectral_vs import sim
-    from spectral_vs.servo import start_poses
+    from spectral_vs.experiment import start_poses
 
     params = params if params is not None else sim.SimParams()
     size = (params.camera.intrinsics.width, params.camera.intrinsics.height)

@@ -23,7 +23,7 @@ import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
 from spectral_vs._core import Kinematics, PointCloud
-from spectral_vs.servo import ViewCheck
+from spectral_vs.experiment import ViewCheck
 from spectral_vs.sim.camera import CameraParams, back_project, depth_to_cloud, render_depth
 from spectral_vs.sim.robots import (
     BASE_LINK,
@@ -292,7 +292,7 @@ class PyBulletRobot:
     def view_check(
         self, min_share: float = 0.3, min_camera_height: float = 0.05, q_reference=None
     ) -> ViewCheck:
-        """The start check of :func:`spectral_vs.servo.start_poses` for this robot and scene.
+        """The start check of :func:`spectral_vs.experiment.start_poses` for this robot and scene.
 
         The reference points are those of a noise-free depth image rendered at
         ``q_reference`` with this camera (the arm is moved there and back), so the check,
@@ -309,7 +309,7 @@ class PyBulletRobot:
 
         Returns
         -------
-        spectral_vs.servo.ViewCheck
+        spectral_vs.experiment.ViewCheck
             ``check(q) -> bool``.
         """
         q_reference = np.asarray(

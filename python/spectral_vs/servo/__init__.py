@@ -1,0 +1,136 @@
+"""3D spectral visual servoing: the camera is driven to the pose where a reference cloud was
+captured (paper, section II-D, eq. 16-18 and Algorithm 1).
+
+At every control step the reference cloud (captured at the desired pose, camera frame) is
+registered onto the current cloud (current camera frame): ``T_scene_model`` of
+``align(model=reference, scene=current)`` is ``T_current_desired``, the pose of the desired
+camera frame in the current one. The decoupled law
+
+    v = lambda_t t,    omega = lambda_r theta u        (T_current_desired = [R(theta u) t])
+
+gives the camera twist, expressed in the current camera frame, that :meth:`Kinematics.
+joint_velocities` turns into joint velocities (eq. 18, ``q_dot = J_c^+ X_dot_c``). It is the
+classical position-based law: the error ``(t, theta u)`` decays exponentially and the camera
+origin moves along a straight line toward the desired one.
+
+Two ways to get the estimate (``ServoParams.mode``):
+
+``"iteration"``
+    The paper: one update of Algorithm 1 per control step, from the identity, without the
+    global rotation search. The robot's motion plays the role of the iterations.
+``"pose"``
+    A full registration per step (Algorithm 1 to convergence, with or without the global
+    rotation search): a position-based servo on the converged estimate.
+
+With ``ServoParams.warm_start`` each registration starts from the previous estimate carried
+along the camera's measured motion instead of the identity (the most robust setting measured,
+with ``"pose"``: docs/servoing.md).
+
+:func:`run_servo` closes the loop on any :class:`~spectral_vs.robot.RobotInterface` and stops
+the robot safely (zero velocity, with a reason) on a sensor outage longer than
+``ServoParams.max_outage``, an implausible jump of the estimate, a joint limit, or a spent
+budget. Shorter sensor faults (a dropped or repeated frame, too few points, a hand passing
+in front of the camera) hold the robot still and the servo goes on (:data:`HOLDS`).
+
+The package, one module a job:
+
+- :mod:`~spectral_vs.servo.settings`: :class:`ServoParams`, grouped by stage;
+- :mod:`~spectral_vs.servo.controller`: :class:`SpectralServo` and its step, with the plane
+  turn (:mod:`~spectral_vs.servo.plane_turn`), the sensor faults
+  (:mod:`~spectral_vs.servo.faults`) and the relocalization and recovery
+  (:mod:`~spectral_vs.servo.relocalization`) it runs inside the step;
+- :mod:`~spectral_vs.servo.law`: the decoupled law and its saturation;
+- :mod:`~spectral_vs.servo.loop`: :func:`run_servo`;
+- :mod:`~spectral_vs.servo.records`: :class:`ServoStatus`, :class:`ServoRecord`,
+  :class:`ServoLog`, :data:`REASONS`, :data:`HOLDS`.
+
+The experiment's harness (start poses, the start check, recording) is
+:mod:`spectral_vs.experiment`, and the figure of a run :func:`spectral_vs.plotting.plot_servo`;
+their names are also read from here, as before.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
+from spectral_vs.servo.controller import SpectralServo
+from spectral_vs.servo.loop import run_servo
+from spectral_vs.servo.plane_turn import dominant_normal, dominant_plane
+from spectral_vs.servo.records import (
+    HOLDS,
+    REASONS,
+    ServoLog,
+    ServoRecord,
+    ServoStatus,
+    _empty_record,  # noqa: F401  (read by the tests)
+)
+from spectral_vs.servo.relocalization import field_share
+from spectral_vs.servo.settings import ServoParams
+from spectral_vs.servo.stages import (
+    FaultParams,
+    LawParams,
+    PlaneTurnParams,
+    RecoveryParams,
+    RegistrationParams,
+    RelocalizationParams,
+    StopParams,
+    WatchdogParams,
+)
+
+#: Names kept here for the code written before the package: where they live now.
+_MOVED = {
+    "START_SETS": "spectral_vs.experiment",
+    "CloudRecorder": "spectral_vs.experiment",
+    "ViewCheck": "spectral_vs.experiment",
+    "random_start": "spectral_vs.experiment",
+    "record_dict": "spectral_vs.experiment",
+    "start_poses": "spectral_vs.experiment",
+    "true_errors": "spectral_vs.experiment",
+    "view_share": "spectral_vs.experiment",
+    "plot_servo": "spectral_vs.plotting",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The harness's and the figure's names, imported when first read (the servo itself
+    does not depend on them)."""
+    if name in _MOVED:
+        return getattr(importlib.import_module(_MOVED[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = [
+    "HOLDS",
+    "REASONS",
+    "START_SETS",
+    "CloudRecorder",
+    "FaultParams",
+    "LawParams",
+    "PlaneTurnParams",
+    "RecoveryParams",
+    "RegistrationParams",
+    "RelocalizationParams",
+    "ServoLog",
+    "ServoParams",
+    "ServoRecord",
+    "ServoStatus",
+    "SpectralServo",
+    "StopParams",
+    "ViewCheck",
+    "WatchdogParams",
+    "dominant_normal",
+    "dominant_plane",
+    "field_share",
+    "plot_servo",
+    "pose_error",
+    "random_start",
+    "record_dict",
+    "rotation_matrix",
+    "rotation_vector",
+    "run_servo",
+    "start_poses",
+    "true_errors",
+    "view_share",
+]

@@ -1,0 +1,442 @@
+"""The servo controller (:class:`SpectralServo`): from the current cloud to a camera twist,
+one registration of the reference per step, turned about the reference's dominant plane,
+guarded by the watchdog and the stop rule with its hysteresis."""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+
+import numpy as np
+
+from spectral_vs._core import (
+    AlignResult,
+    ModelAligner,
+    PointCloud,
+    ViewAlignParams,
+)
+from spectral_vs.poses import pose_error
+from spectral_vs.registration import CloudLike, as_cloud
+from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
+from spectral_vs.servo.law import _rigid_inverse
+from spectral_vs.servo.plane_turn import _PlaneTurn, dominant_plane
+from spectral_vs.servo.records import (
+    ServoRecord,
+    ServoStatus,
+    _converged_status,
+    _empty_record,
+)
+from spectral_vs.servo.relocalization import Relocalization
+from spectral_vs.servo.settings import ServoParams
+
+
+class SpectralServo(SensorFaults, Relocalization):
+    """The servo controller: from the current cloud to a camera twist.
+
+    Parameters
+    ----------
+    reference : PointCloud or ndarray
+        Cloud captured at the desired camera pose, in that camera frame, metres; (N, 3) or
+        (N, 6) arrays (points, normals) are accepted. Missing normals are estimated and
+        turned toward the camera origin.
+    params : ServoParams, optional
+        Settings; defaults to ``ServoParams()``.
+
+    Raises
+    ------
+    ValueError
+        If the reference is empty or has fewer than ``params.min_points`` points.
+    """
+
+    def __init__(self, reference: CloudLike, params: ServoParams | None = None) -> None:
+        self.params = params if params is not None else ServoParams()
+        cloud = self._crop(as_cloud(reference, "reference"))
+        if len(cloud) < self.params.faults.min_points:
+            raise ValueError(
+                f"reference has {len(cloud)} points, fewer than min_points = "
+                f"{self.params.faults.min_points}"
+            )
+        self._align_params = self.params.align_params()
+        self._view_params = ViewAlignParams(**self.params.relocalization.view_overrides)
+        self.reference = self._prepare(cloud, "reference")
+        # What the relocalization registers: the reference as captured, with its normals.
+        self._reference_view = cloud if cloud.has_normals else self.reference
+        # The reference's side of the registration (its EGI coefficients, centred points)
+        # is prepared once here; each step adds only the current cloud's work.
+        self._aligner = ModelAligner(self.reference, self._align_params)
+        self._tracking_aligner: ModelAligner | None = None
+        if self.params.uses_tracking():
+            tracking = copy.copy(self._align_params)
+            tracking.max_translation = self.params.registration.tracking_translation
+            self._tracking_aligner = ModelAligner(self.reference, tracking)
+        self._centroid = np.asarray(self.reference.centroid())
+        self._plane_turn: _PlaneTurn | None = (
+            _PlaneTurn.of(self._reference_view, self._centroid, self.params, self._align_params)
+            if self.params.plane.plane_turn
+            else None
+        )
+        reference_points = np.asarray(cloud.points)
+        stride = max(1, math.ceil(len(reference_points) / _OCCLUSION_REFERENCE_POINTS))
+        self._occlusion_reference = np.array(reference_points[::stride], dtype=float)
+        # The recovery's reference side: the plane it levels the camera onto, if any.
+        self._reference_plane = dominant_plane(
+            np.asarray(self._reference_view.points),
+            np.asarray(self._reference_view.normals),
+            self.params.plane.plane_cone,
+            self.params.plane.min_plane_share,
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous estimate (the watchdog's memory), the step count, whether the
+        servo converged (``ServoParams.reengage_translation``) and what the fault tests
+        remember (the last frame, the outage's start)."""
+        self._previous = None
+        self._armed = False
+        self._steps = 0
+        self._last_turn = 0.0
+        self._anchored = False
+        self._lost = True
+        self._since_relocalization = None
+        self._confirmed = False
+        self._unconfirmed = 0
+        self._reset_recovery()
+        self._settled = False
+        self._outside = 0
+        self._reset_faults()
+
+    @property
+    def last_turn(self) -> float:
+        """The turn about the reference's dominant normal added to the last estimate, rad
+        (0 without ``ServoParams.plane_turn`` or a dominant plane)."""
+        return self._last_turn
+
+    @property
+    def has_plane_turn(self) -> bool:
+        """True when the estimates are turned about the reference's dominant normal
+        (``ServoParams.plane_turn`` and a reference with a dominant plane)."""
+        return self._plane_turn is not None
+
+    @property
+    def previous_estimate(self) -> np.ndarray | None:
+        """The last accepted ``T_current_desired`` (None before the first step)."""
+        return None if self._previous is None else self._previous.copy()
+
+    def estimate(
+        self, current: CloudLike, initial_guess: np.ndarray | None = None
+    ) -> tuple[np.ndarray, AlignResult]:
+        """Register the reference onto ``current``: ``T_current_desired`` and the AlignResult.
+
+        Parameters
+        ----------
+        current : PointCloud or ndarray
+            The cloud of the camera at its current pose, camera frame, metres (not empty
+            within ``max_depth``).
+        initial_guess : ndarray (4, 4), optional
+            ``T_current_desired`` to start Algorithm 1 from; the identity by default.
+
+        Returns
+        -------
+        T_current_desired : ndarray, shape (4, 4)
+            The registration's pose, turned about the reference's dominant normal with
+            ``ServoParams.plane_turn`` (the turn is :attr:`last_turn`).
+        result : AlignResult
+            The registration (its ``T_scene_model`` before the turn).
+        """
+        cloud = self._crop(as_cloud(current, "current"))
+        return self._estimate(cloud, initial_guess, self._aligner)
+
+    def _estimate(
+        self, cloud: PointCloud, initial_guess: np.ndarray | None, aligner: ModelAligner
+    ) -> tuple[np.ndarray, AlignResult]:
+        """:meth:`estimate` of the cropped ``cloud`` with the given prepared reference."""
+        scene, result = self._register(cloud, initial_guess, aligner)
+        return self._turned(cloud, scene, np.asarray(result.T_scene_model)), result
+
+    def _register(
+        self, cloud: PointCloud, initial_guess: np.ndarray | None, aligner: ModelAligner
+    ) -> tuple[PointCloud, AlignResult]:
+        """The downsampled ``cloud`` and the registration of the reference onto it, without
+        the plane turn (a step turns only the estimate it keeps)."""
+        scene = self._prepare(cloud, "current")
+        return scene, aligner.align(scene, initial_guess)
+
+    def _turned(self, cloud: PointCloud, scene: PointCloud, T: np.ndarray) -> np.ndarray:
+        """``T`` turned about the reference's dominant normal (``ServoParams.plane_turn``),
+        from the normals of ``cloud`` (those of its downsampled ``scene`` without)."""
+        self._last_turn = 0.0
+        if self._plane_turn is not None:
+            normals = np.asarray((cloud if cloud.has_normals else scene).normals)
+            self._last_turn = self._plane_turn.turn(normals, T)
+            T = self._plane_turn.turned(T, self._last_turn)
+        return T
+
+    def step(
+        self,
+        current: CloudLike,
+        T_previous_current: np.ndarray | None = None,
+        *,
+        now: float | None = None,
+        stamp: float | None = None,
+    ) -> tuple[np.ndarray, ServoStatus]:
+        """One control step: the camera twist toward the desired pose, and the status.
+
+        Parameters
+        ----------
+        current : PointCloud or ndarray
+            The current cloud, camera frame, metres.
+        T_previous_current : ndarray (4, 4), optional
+            The camera's own motion since the previous step (pose of the current camera
+            frame in the previous one, e.g. from the forward kinematics). The watchdog then
+            compares the new estimate with the previous one carried along this motion
+            (over the held steps since, too); without it, with the previous estimate itself,
+            and the camera counts as still for the stale-frame test.
+        now : float, optional
+            Time of the capture, s, on the clock that ``ServoParams.max_outage`` is
+            measured on (:func:`run_servo` passes the robot clock). Without it, the
+            computer's monotonic clock (:func:`time.monotonic`) at the call.
+        stamp : float, optional
+            The capture's own time stamp from the sensor driver, s: a stamp not later than
+            the last one marks a stale frame. Without it, only the fingerprint tells.
+
+        Returns
+        -------
+        twist : ndarray, shape (6,)
+            ``(v, omega)``, camera frame, m/s and rad/s; zero unless the state is running
+            and the step was not held.
+        status : ServoStatus
+            ``running`` (also at a held step: its message says why, see :data:`HOLDS`),
+            ``converged`` (the estimate is within the tolerances and the fitness high
+            enough) or ``stopped`` with a reason: ``"sensor_outage"`` (holds for longer
+            than ``max_outage``) or ``"jump"`` (the watchdog, armed once the fitness has
+            reached ``watchdog_fitness``).
+        """
+        twist, status, _ = self.step_record(current, T_previous_current, now=now, stamp=stamp)
+        return twist, status
+
+    def step_record(
+        self,
+        current: CloudLike,
+        T_previous_current: np.ndarray | None = None,
+        *,
+        now: float | None = None,
+        stamp: float | None = None,
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """:meth:`step` with its :class:`ServoRecord`."""
+        cpu = time.process_time()
+        twist, status, record = self._step_record(current, T_previous_current, now, stamp)
+        record.cpu_seconds = time.process_time() - cpu
+        return twist, status, record
+
+    def _step_record(
+        self,
+        current: CloudLike,
+        T_previous_current: np.ndarray | None,
+        now: float | None,
+        stamp: float | None,
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """:meth:`step_record` without its CPU time: the frame's faults, the occluders, the
+        relocalization or the recovery, the registration, the watchdog, the stop rule."""
+        start = time.perf_counter()
+        now = time.monotonic() if now is None else float(now)
+        motion = self._carry(T_previous_current)
+        raw = as_cloud(current, "current")
+        cloud = self._crop(raw)
+        record = _empty_record(self._steps, len(cloud))
+        self._steps += 1
+        fault = self._frame_fault(raw, len(cloud), stamp)
+        if fault is not None:
+            return self._hold(record, *fault, now, start)
+        cloud, occluded, hidden, too_few = self._drop_occluders(cloud, record, motion)
+        if too_few is not None:
+            return self._hold(record, "occluded", too_few, now, start)
+
+        if self._since_relocalization is not None:
+            self._since_relocalization += 1
+        if self.params.relocalization.relocalize and self._lost and self._relocalization_due():
+            self._relocalize(cloud, record, motion)
+            motion = self._motion
+        if self._recovering():
+            return self._recover(cloud, record, motion, now, start)
+        T = self._measure(cloud, record, motion)
+
+        jump = self._jump(T, motion)
+        if occluded:
+            # Ridden only when the registration of the rest is sound: a registration that
+            # the occluder corrupted turns into no motion and trips no watchdog.
+            message = self._occluded_hold(record, hidden, jump)
+            if message is not None:
+                return self._hold(record, "occluded", message, now, start)
+        if jump is not None:
+            record.status = ServoStatus("stopped", "jump", jump)
+        else:
+            self._accept(T, record, now)
+            self._command(T, record)
+        record.seconds = time.perf_counter() - start
+        return record.twist, record.status, record
+
+    def _registration(
+        self, cloud: PointCloud, record: ServoRecord, guess: np.ndarray | None, motion: np.ndarray
+    ) -> tuple[PointCloud, AlignResult]:
+        """The step's registration from ``guess``: within ``tracking_translation`` when it
+        may track (:meth:`_can_track`), redone with ``max_translation`` when a locked-on
+        tracking fit is poor; fills ``record.tracking``."""
+        # A relocalized step checks the global pose on the full grid once.
+        tracking = not record.relocalized and self._can_track(guess, motion)
+        if tracking:
+            assert self._tracking_aligner is not None
+            scene, result = self._register(cloud, guess, self._tracking_aligner)
+            # Once locked on, a poor fit may mean the answer lies beyond the tracking bound
+            # (the camera or the scene jumped): the full search decides, and the watchdog
+            # sees the jump. Before, a poor fit is the relocalization's to judge.
+            tracking = not self._armed or result.fitness >= self.params.watchdog.watchdog_fitness
+        if not tracking:
+            scene, result = self._register(cloud, guess, self._aligner)
+        record.tracking = tracking
+        return scene, result
+
+    def _measure(self, cloud: PointCloud, record: ServoRecord, motion: np.ndarray) -> np.ndarray:
+        """The step's estimate ``T_current_desired``: the registration turned about the
+        plane, or the last estimate carried along the camera's motion before lock-on; fills
+        the record's estimate, errors, fitness, confidence and Algorithm 1's figures."""
+        p = self.params
+        guess = None
+        if (p.registration.warm_start or self._anchored) and self._previous is not None:
+            guess = self._predicted(motion)
+        scene, result = self._registration(cloud, record, guess, motion)
+        last = result.history[-1] if len(result.history) else None
+        record.fitness = float(result.fitness)
+        # Before lock-on the views share too little for Algorithm 1's step: the EGI
+        # correlation of two partial views peaks 10-20 degrees off the truth, and steps
+        # toward it drift away from a right global estimate. The last good estimate carried
+        # along the camera's measured motion is the estimate until the registration locks
+        # on (fitness watchdog_fitness).
+        record.carried = (
+            self._anchored
+            and not self._armed
+            and guess is not None
+            and record.fitness < p.watchdog.watchdog_fitness
+        )
+        T = np.asarray(result.T_scene_model)
+        # The plane turn is of the estimate the step keeps, and of the confidence's pose
+        # under its threshold: a carried step with a confident fit uses neither.
+        if not record.carried or record.fitness < p.relocalization.relocalize_fitness:
+            T = self._turned(cloud, scene, T)
+        # fitness / share >= fitness: the share is needed only under the threshold.
+        record.confidence = (
+            min(1.0, record.fitness)
+            if record.fitness >= p.relocalization.relocalize_fitness
+            else self._confidence(T, record.fitness, cloud)
+        )
+        if record.carried:
+            assert guess is not None
+            T = guess
+            self._last_turn = 0.0
+        record.T_current_desired = T
+        record.translation_error, record.rotation_error = pose_error(T)
+        record.iterations = int(result.iterations)
+        record.plane_turn = 0.0 if record.carried else self._last_turn
+        if last is not None:
+            record.translation_cost = float(last.translation_cost)
+            record.rotation_cost = float(last.rotation_cost)
+            record.translation_step = float(last.translation_step)
+            record.rotation_gradient = float(last.rotation_gradient)
+        return T
+
+    def _occluded_hold(self, record: ServoRecord, hidden: float, jump: str | None) -> str | None:
+        """Why a step with an occluder hiding ``hidden`` of the reference holds: the
+        estimate would trip the watchdog (``jump``), or its fitness over the reference's
+        visible part is under ``watchdog_fitness``; None when the step may move."""
+        visible_fitness = record.fitness / max(1.0 - hidden, 1e-9)
+        if jump is not None:
+            return f"with an occluder, {jump}"
+        if visible_fitness < self.params.watchdog.watchdog_fitness:
+            return (
+                f"with an occluder hiding {100 * hidden:.0f}% of the reference, the "
+                f"fitness over the rest is {visible_fitness:.3f} (watchdog_fitness "
+                f"{self.params.watchdog.watchdog_fitness})"
+            )
+        return None
+
+    def _accept(self, T: np.ndarray, record: ServoRecord, now: float) -> None:
+        """Keep ``T`` as the previous estimate: the watchdog's and the warm start's memory,
+        the outage's clock, the lock-on and whether the servo is lost."""
+        self._previous = T
+        self._motion = np.eye(4)
+        self._outage_start = now
+        self._armed = self._armed or record.fitness >= self.params.watchdog.watchdog_fitness
+        self._lost = not record.confidence >= self.params.relocalization.relocalize_fitness
+        if record.relocalized:
+            self._confirmed = not self._lost
+        if not self._lost:
+            self._unconfirmed = 0
+
+    def _command(self, T: np.ndarray, record: ServoRecord) -> None:
+        """The stop rule with its hysteresis, else the twist toward ``T``."""
+        converged = self._converged(record)
+        if converged:
+            self._outside = 0
+        self._settled = converged or (self._settled and self._held(record))
+        if self._settled:
+            record.status = _converged_status(record.translation_error, record.rotation_error)
+        else:
+            record.twist, record.saturation = self.twist(T)
+
+    def _can_track(self, guess: np.ndarray | None, motion: np.ndarray | None) -> bool:
+        """Whether this registration may seek only ``tracking_translation``: locked on (the
+        watchdog armed, or a relocalization taken), and
+        the predicted estimate moves the reference's centroid by at most half of it from
+        the registration's start ``guess`` (identity when None); ``motion`` as for
+        :meth:`_predicted`."""
+        locked = self._armed or self._anchored
+        if self._tracking_aligner is None or not locked or self._previous is None:
+            return False
+        predicted = self._predicted(motion)
+        start = np.eye(4) if guess is None else np.asarray(guess, dtype=float)
+        c = self._centroid
+        moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
+        return bool(np.abs(moved).max() <= 0.5 * self.params.registration.tracking_translation)
+
+    def _converged(self, record: ServoRecord) -> bool:
+        p = self.params
+        if record.fitness < p.stop.min_fitness:
+            return False
+        if (
+            record.translation_error < p.stop.translation_tolerance
+            and record.rotation_error < p.stop.rotation_tolerance
+        ):
+            return True
+        eq17 = record.translation_step + record.rotation_gradient
+        return p.stop.step_tolerance > 0 and bool(eq17 < p.stop.step_tolerance)
+
+    def _held(self, record: ServoRecord) -> bool:
+        """Whether a converged servo stays so: its estimate has not been outside the
+        re-engage bounds for ``reengage_steps`` steps in a row."""
+        p = self.params
+        inside = (
+            record.translation_error <= p.stop.reengage_translation
+            and record.rotation_error <= p.stop.reengage_rotation
+        )
+        self._outside = 0 if inside else self._outside + 1
+        return self._outside < p.stop.reengage_steps
+
+    def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
+        """A message when ``T`` is implausibly far from the previous estimate carried along
+        ``motion`` (as for :meth:`_predicted`), else None."""
+        if self._previous is None or not self._armed:
+            return None
+        predicted = self._predicted(motion)
+        # |translation| of predicted^-1 T is |t - t_predicted|: the two parts are independent.
+        moved, turned = pose_error(_rigid_inverse(predicted) @ T)
+        p = self.params
+        if moved > p.watchdog.jump_limit_translation or turned > p.watchdog.jump_limit_rotation:
+            return (
+                f"the estimate changed by {1000 * moved:.1f} mm and {math.degrees(turned):.2f} "
+                f"deg in one step (limits {1000 * p.watchdog.jump_limit_translation:.1f} mm, "
+                f"{math.degrees(p.watchdog.jump_limit_rotation):.2f} deg)"
+            )
+        return None
+
+
+# --------------------------------------------------------------------------- the loop

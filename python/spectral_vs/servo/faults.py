@@ -1,0 +1,159 @@
+"""Sensor faults inside the controller's step: a frame already seen (stale), too few
+points, an occluder in front of the camera; and the hold that rides them, up to
+``ServoParams.max_outage`` (:data:`~spectral_vs.servo.HOLDS`). The tests themselves are free
+functions of :mod:`spectral_vs.sensor_faults`."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from spectral_vs._core import PointCloud
+from spectral_vs.poses import pose_error
+from spectral_vs.sensor_faults import frame_fingerprint, near_occluders
+from spectral_vs.servo.records import ServoRecord, ServoStatus
+from spectral_vs.servo.state import ControllerState
+
+#: The camera counts as still (a repeated frame is then no stale frame) while it has moved
+#: less than this since the frame was first seen, m and rad.
+_STILL_TRANSLATION = 1e-6
+_STILL_ROTATION = 1e-6
+
+#: Slack of the outage's comparison with max_outage, s: a robot clock adding up periods of
+#: 0.1 s reads 0.30000000000000004 after three.
+_CLOCK_TOLERANCE = 1e-9
+
+#: Reference points kept for the occluder test (a strided subsample of the reference as
+#: captured): its bins (2.9 degrees) then hold about 10 points each at 160 x 120.
+_OCCLUSION_REFERENCE_POINTS = 5000
+
+
+class SensorFaults(ControllerState):
+    """The fault tests of :class:`~spectral_vs.servo.SpectralServo` (a base class of it:
+    the tests read and keep the controller's state)."""
+
+    def _frame_fault(
+        self, raw: PointCloud, points: int, stamp: float | None
+    ) -> tuple[str, str] | None:
+        """``(hold, message)`` when the frame cannot be used (too few of its ``points``
+        within ``max_depth``, or a stale frame), else None."""
+        p = self.params
+        if points == 0 or points < p.faults.min_points:
+            hold = "empty_cloud" if points == 0 else "too_few_points"
+            return hold, f"the current cloud has {points} points (min_points {p.faults.min_points})"
+        stale = self._stale(raw, stamp)
+        return None if stale is None else ("stale_frame", stale)
+
+    def _drop_occluders(
+        self, cloud: PointCloud, record: ServoRecord, motion: np.ndarray
+    ) -> tuple[PointCloud, bool, float, str | None]:
+        """A hand in front of the camera: ``cloud`` without the surfaces nearer than the
+        reference could be, whether they are an occluder (``occlusion_min_share``), the
+        share of the reference they hide, and a message when too few points remain (the
+        step holds). Runs once locked on; fills ``record.occluded_points`` and
+        ``record.hidden_share``."""
+        p = self.params
+        if not (
+            self._armed and self._previous is not None and math.isfinite(p.faults.occlusion_margin)
+        ):
+            return cloud, False, 0.0, None
+        points = len(cloud)
+        mask, hidden = near_occluders(
+            np.asarray(cloud.points),
+            self._occlusion_reference,
+            self._predicted(motion),
+            p.faults.occlusion_margin,
+        )
+        record.occluded_points = int(mask.sum())
+        record.hidden_share = hidden
+        if not record.occluded_points:
+            return cloud, False, hidden, None
+        keep = ~mask
+        normals = cloud.normals
+        cloud = PointCloud(
+            np.asarray(cloud.points)[keep],
+            None if normals is None else np.asarray(normals)[keep],
+        )
+        occluded = record.occluded_points >= p.faults.occlusion_min_share * points
+        if len(cloud) < p.faults.min_points:
+            message = (
+                f"{len(cloud)} points remain without {record.occluded_points} "
+                f"occluding ones (min_points {p.faults.min_points})"
+            )
+            return cloud, occluded, hidden, message
+        return cloud, occluded, hidden, None
+
+    def _reset_faults(self) -> None:
+        """Forget what the fault tests remember: the camera's motion since the last accepted
+        step, the last frame's fingerprint and stamp, and the outage's start."""
+        self._motion = np.eye(4)  # T_accepted_current: since the last accepted step
+        self._frame_key: bytes | None = None  # fingerprint of the last non-empty frame
+        self._frame_motion = np.eye(4)  # the camera's motion since that frame came first
+        self._last_stamp: float | None = None
+        self._outage_start: float | None = None  # the last accepted frame's time
+
+    def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:
+        """Add the camera's motion since the previous step (identity when not given) to the
+        motion since the last accepted step and since the last frame came first; return
+        the former (``T_accepted_current``)."""
+        if T_previous_current is not None:
+            step = np.asarray(T_previous_current, dtype=float)
+            self._motion = self._motion @ step
+            self._frame_motion = self._frame_motion @ step
+        return self._motion
+
+    def _stale(self, cloud: PointCloud, stamp: float | None) -> str | None:
+        """A message when ``cloud`` is a frame already seen, else None; remembers it.
+
+        A stamp not later than the last one is stale. The same fingerprint is stale once
+        the camera has moved since the frame came first: a still camera in a still scene
+        may see the very same frame (a noise-free simulation does), and acting on it then
+        is right.
+        """
+        if stamp is not None:
+            last = self._last_stamp
+            if last is not None and not float(stamp) > last:
+                return f"capture stamp {float(stamp):.6f} s is not after the last, {last:.6f} s"
+            self._last_stamp = float(stamp)
+        key = frame_fingerprint(np.asarray(cloud.points))
+        if key != self._frame_key:
+            self._frame_key = key
+            self._frame_motion = np.eye(4)
+            return None
+        moved, turned = pose_error(self._frame_motion)
+        if moved < _STILL_TRANSLATION and turned < _STILL_ROTATION:
+            return None
+        return (
+            f"the same frame again after the camera moved {1000 * moved:.2f} mm and "
+            f"{math.degrees(turned):.3f} deg"
+        )
+
+    def _hold(
+        self,
+        record: ServoRecord,
+        hold: str,
+        message: str,
+        now: float,
+        start: float,
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """Finish ``record`` as a held step (zero twist, nothing remembered), or stop with
+        ``"sensor_outage"`` when the holds have lasted longer than ``max_outage``."""
+        if self._outage_start is None:
+            self._outage_start = now  # no frame accepted yet: the outage starts here
+        outage = now - self._outage_start
+        record.hold, record.outage = hold, outage
+        record.twist = np.zeros(6)
+        limit = self.params.faults.max_outage
+        if limit == 0 or outage > limit + _CLOCK_TOLERANCE:
+            record.status = ServoStatus(
+                "stopped",
+                "sensor_outage",
+                f"no usable frame for {outage:.3f} s (max_outage {limit:g} s); "
+                f"last fault {hold}: {message}",
+            )
+        else:
+            record.status = ServoStatus("running", "", f"holding ({hold}): {message}")
+        record.seconds = time.perf_counter() - start
+        return record.twist, record.status, record

@@ -1,0 +1,102 @@
+"""What the parts of the controller share: its settings, the reference's prepared sides,
+the state it keeps between steps, and the helpers every part uses (the crop to
+``max_depth``, the downsampling, the prediction of the estimate, the control law)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_downsample
+from spectral_vs.poses import rotation_vector
+from spectral_vs.registration import prepare
+from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
+from spectral_vs.servo.settings import ServoParams
+
+
+class ControllerState:
+    """The base of :class:`~spectral_vs.servo.SpectralServo` and of its parts
+    (:class:`~spectral_vs.servo.faults.SensorFaults`,
+    :class:`~spectral_vs.servo.relocalization.Relocalization`)."""
+
+    params: ServoParams
+    reference: PointCloud  #: the reference, downsampled, with normals
+    _reference_view: PointCloud  #: the reference as captured (cropped), for relocalization
+    _view_params: ViewAlignParams
+    _aligner: ModelAligner
+    _tracking_aligner: ModelAligner | None
+    _centroid: np.ndarray
+    _occlusion_reference: np.ndarray  #: a strided subsample of the reference's points
+    _reference_plane: tuple[np.ndarray, float] | None  #: its dominant plane (normal, distance)
+
+    # What the controller remembers between steps (set by reset()).
+    _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
+    _armed: bool  #: the watchdog is armed (a fitness of watchdog_fitness was reached)
+    _steps: int
+    _last_turn: float  #: the plane turn of the last estimate, rad
+    _anchored: bool  #: a global registration was taken: registrations warm-start
+    _lost: bool  #: no trusted estimate: the next step relocalizes
+    _since_relocalization: int | None  #: steps since the last attempt
+    _confirmed: bool  #: the last relocalization was taken and confirmed
+    _unconfirmed: int  #: relocalizations in a row not confirmed (the backoff)
+    _failed_relocalizations: int  #: relocalizations in a row under the score (the recovery)
+    _recovery_steps: int
+    _T_motion_backoff: np.ndarray | None  #: _motion at the back-off's start
+    _settled: bool  #: converged and not re-engaged since (the hysteresis)
+    _outside: int  #: settled steps in a row whose estimate left the re-engage bounds
+    _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
+    _frame_key: bytes | None  #: fingerprint of the last non-empty frame
+    _frame_motion: np.ndarray  #: the camera's motion since that frame came first
+    _last_stamp: float | None
+    _outage_start: float | None  #: the last accepted frame's time
+
+    def _crop(self, cloud: PointCloud) -> PointCloud:
+        """The points within ``max_depth`` of the camera (along its optical axis)."""
+        if not math.isfinite(self.params.registration.max_depth) or len(cloud) == 0:
+            return cloud
+        points = np.asarray(cloud.points)
+        if (
+            points[:, 2].max() <= self.params.registration.max_depth
+        ):  # the usual case, without a mask
+            return cloud
+        return cloud.select(
+            points[:, 2] <= self.params.registration.max_depth
+        )  # copied in the core
+
+    def _prepare(self, cloud: PointCloud, argument: str) -> PointCloud:
+        """The cloud downsampled to ``downsample_size``, with normals."""
+        size = self.params.registration.downsample_size or self.params.registration.voxel_size / 2
+        try:
+            cloud = voxel_downsample(cloud, size) if len(cloud) else cloud
+        except ValueError as error:
+            raise ValueError(f"{argument}: downsampling to {size} m: {error}") from error
+        return prepare(cloud, argument, self.params.registration.voxel_size, False, (0, 0, 0))
+
+    def _predicted(self, motion: np.ndarray | None) -> np.ndarray:
+        """The previous (last accepted) estimate carried along the camera's motion since
+        that step, ``motion`` = ``T_accepted_current`` (None: the camera is taken as still)."""
+        assert self._previous is not None
+        if motion is None:
+            return self._previous
+        return _rigid_inverse(np.asarray(motion, dtype=float)) @ self._previous
+
+    def twist(self, T_current_desired: np.ndarray) -> tuple[np.ndarray, float]:
+        """The decoupled law and its saturation.
+
+        Parameters
+        ----------
+        T_current_desired : ndarray, shape (4, 4)
+            Pose of the desired camera frame in the current camera frame.
+
+        Returns
+        -------
+        twist : ndarray, shape (6,)
+            ``(v, omega)`` of the camera in the current camera frame, m/s and rad/s:
+            ``v = lambda_t t``, ``omega = lambda_r theta u``, scaled down as a whole so that
+            ``|v| <= max_linear_speed`` and ``|omega| <= max_angular_speed``.
+        scale : float
+            The factor in (0, 1] that was applied.
+        """
+        T = np.asarray(T_current_desired, dtype=float)
+        return _saturated_twist(T[:3, 3], rotation_vector(T[:3, :3]), self.params.law)
