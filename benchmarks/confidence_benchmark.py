@@ -23,6 +23,7 @@ Usage (rerun after any change of the defaults; one command)::
     nice -n 10 python benchmarks/confidence_benchmark.py            # about 15 min, 2 cores
     python benchmarks/confidence_benchmark.py --quick               # smoke run, writes nothing
     python benchmarks/confidence_benchmark.py --report-only         # tables from the JSON
+    nice -n 10 python benchmarks/confidence_benchmark.py --development  # threshold's run
 
 Needs pybullet (cases), matplotlib (figure), and for the peers the ``bench`` extra.
 """
@@ -54,6 +55,7 @@ RESULTS = ROOT / "benchmarks" / "results" / "confidence.json"
 DOC = ROOT / "docs" / "experiments.md"
 FIGURE = ROOT / "docs" / "figures" / "confidence_roc.png"
 PARTIAL = ROOT / "benchmarks" / "results" / "confidence.partial.jsonl"
+DEVELOPMENT = ROOT / "benchmarks" / "results" / "confidence_development.jsonl"
 
 ANGLES = (10, 30, 60, 90, 120, 150, 180)
 #: Cases per (family, angle) cell: 7 angles x 1 on each tuning family, 7 x 2 on each
@@ -362,7 +364,16 @@ def main() -> int:
         "--from-partial", default="", help="comma-separated record files of runs to report"
     )
     parser.add_argument("--cases-per-cell", type=int, default=None)
+    parser.add_argument(
+        "--development",
+        action="store_true",
+        help="the run the library's threshold was chosen on: tuning cases disjoint from the "
+        "benchmark's (prints the balanced threshold; writes only its records)",
+    )
     args = parser.parse_args()
+    if args.development:
+        development()
+        return 0
     if args.report_only:
         write_report(json.loads(RESULTS.read_text()))
         return 0
@@ -392,6 +403,49 @@ def main() -> int:
     if not args.quick:
         finish(records)
     return 0
+
+
+#: The development run: the tuning families at these angles, 2 cases each, at case indices
+#: 2 and 3 (the benchmark's tuning cases are index 0), so that its poses are not the
+#: benchmark's.
+DEVELOPMENT_ANGLES = (30, 90, 150, 180)
+DEVELOPMENT_FIRST_INDEX = 2
+
+
+def development() -> None:
+    """Align the development cases (records to DEVELOPMENT) and print the balanced threshold
+    and the interval of thresholds as balanced (``kConfidenceThreshold`` is chosen here)."""
+    DEVELOPMENT.unlink(missing_ok=True)
+    records = []
+    for family in case_lib.TUNING_FAMILIES:
+        for spec in specs_of(family, DEVELOPMENT_ANGLES, 2):
+            spec = case_lib.CaseSpec(
+                spec.family, spec.object, spec.angle_deg, spec.index + DEVELOPMENT_FIRST_INDEX
+            )
+            new = run_case(case_lib.make_case(spec), with_peers=False)
+            records += new
+            with DEVELOPMENT.open("a") as out:
+                out.writelines(json.dumps(report_lib.rounded(r)) + "\n" for r in new)
+    report_balance("development", records)
+    if RESULTS.exists():  # pooled with the benchmark's own tuning poses
+        tuning = json.loads(RESULTS.read_text())["records"]
+        tuning = [r for r in tuning if r["run"] in RUNS and r["family"] in case_lib.TUNING_FAMILIES]
+        report_balance("development + benchmark tuning", records + tuning)
+
+
+def report_balance(name: str, records: list[dict]) -> None:
+    """Print the AUC, the balanced threshold and the interval of thresholds as balanced."""
+    scores = np.array([r["confidence"] for r in records])
+    labels = np.array([r["success"] for r in records])
+    best = balanced_threshold(scores, labels)
+    balance = min(rates(scores, labels, best))
+    cuts = np.unique(scores)
+    equal = [t for t in cuts if min(rates(scores, labels, t)) == balance]
+    above = cuts[cuts > max(equal)]
+    print(f"{name}: {len(records)} poses, {labels.sum()} right; AUC {auc(scores, labels):.4f}; "
+          f"balanced threshold {best:.3f} (kept / rejected "
+          f"{' / '.join(pct(x) for x in rates(scores, labels, best))}), as balanced from "
+          f"{min(equal):.3f} to {above[0] if len(above) else 1.0:.3f}")  # fmt: skip
 
 
 def finish(records: list[dict]) -> None:

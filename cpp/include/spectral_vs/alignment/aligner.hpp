@@ -260,7 +260,7 @@ struct AlignResult {
   /// ended, T_scene_model that pose after the polish and ICP (equal without them).
   std::vector<AlignIteration> history;
   /// The confidence that the pose is right, in [0, 1] (verify_pose, confidence_of): the
-  /// share of the model points the sensor would see that lie within a quarter voxel of a
+  /// share of the model points the sensor would see that lie within half a voxel of a
   /// scene point turned the same way, less the share it saw through. Above
   /// kConfidenceThreshold, the pose is right (docs/experiments.md measures how often).
   double confidence = 0.0;
@@ -282,11 +282,11 @@ struct AlignResult {
 };
 
 /// A confidence above this separates right from wrong poses: the balanced threshold
-/// (0.848) of 120 poses of the tuning families (C-1, C-2, C-3 and the real scans: defaults,
-/// truncated searches and other objects' models), where it kept 100% of the right poses
-/// and rejected 96% of the wrong ones; docs/experiments.md "Confidence" reports it on
-/// more cases and on the held-out objects.
-inline constexpr double kConfidenceThreshold = 0.85;
+/// (0.912) of 225 poses of the tuning families at the derived voxel (C-1, C-2, C-3 and the
+/// real scans: defaults, truncated searches and other objects' models), where it kept 96%
+/// of the right poses and rejected 96% of the wrong ones; docs/experiments.md "Confidence"
+/// says how it was chosen and reports it on the held-out objects.
+inline constexpr double kConfidenceThreshold = 0.91;
 
 /// The default voxel of `align` for `voxel_size = 0`, metres: the rule of `view_scale`
 /// applied to the model, max(extent / 12, extent / sqrt(N)) with extent its typical size
