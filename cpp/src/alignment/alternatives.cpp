@@ -88,19 +88,14 @@ Transform refine_translation(const PointCloud& model, const IcpScene& scene, Tra
 }
 
 // The candidate refined as the returned pose was: point-to-plane ICP with pairs within a
-// voxel, then within 0.4 voxel.
-Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, Transform T,
+// voxel, then within kIcpFineDistance voxel.
+Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, const Transform& T,
                         double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
                         int max_iterations = IcpSettings{}.max_iterations) {
   IcpSettings icp;
   icp.viewpoint = viewpoint;
   icp.max_iterations = max_iterations;
-  for (const double distance : {1.0, 0.4}) {
-    icp.max_distance = distance * voxel_size;
-    const IcpOutcome outcome = refine_point_to_plane(model, verifier.fine_grid(), T, icp);
-    if (outcome.iterations > 0) T = outcome.T_scene_model;
-  }
-  return T;
+  return refine_in_two_stages(model, verifier.fine_grid(), T, voxel_size, icp).T_scene_model;
 }
 
 // T_scene_model composed with the turn R of the model about its centroid c.
