@@ -34,6 +34,14 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "for several starts) to --out. Exit code 1 when a final error exceeds "
         f"{MAX_SERVO_ERROR_MM:g} mm or {MAX_SERVO_ERROR_DEG:g} degree.",
     )
+    _add_start_arguments(servo)
+    _add_servo_arguments(servo)
+    _add_output_arguments(servo)
+    servo.set_defaults(run=run_servo_sim)
+
+
+def _add_start_arguments(servo: Any) -> None:
+    """The arm and its start poses: --seed to --set."""
     servo.add_argument("--seed", type=int, default=0, help="seed of the start poses (default: 0)")
     servo.add_argument(
         "--starts",
@@ -57,6 +65,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "0.45 m and 60 deg (large), or beyond that up to 0.6 m and 90 deg with at least 30%% "
         "of the reference still in view and the camera above the table (extreme)",
     )
+
+
+def _add_servo_arguments(servo: Any) -> None:
+    """The servo and the simulation: --mode to --stop-at-joint-limits."""
     servo.add_argument(
         "--mode",
         choices=["iteration", "pose"],
@@ -96,6 +108,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "on (run_servo's stop_at_joint_limit=False; no joint ever crosses its limit): "
         "14-16 of 20 large iiwa starts instead of 12 (docs/kinematics.md)",
     )
+
+
+def _add_output_arguments(servo: Any) -> None:
+    """What is printed and drawn."""
     servo.add_argument(
         "--out",
         "--output",
@@ -115,7 +131,6 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "rotation error (deg), steps, reason and success",
     )
     servo.add_argument("--quiet", action="store_true", help="print only the summary")
-    servo.set_defaults(run=run_servo_sim)
 
 
 def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any) -> str:
@@ -167,14 +182,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
             print(_servo_step_line(record, T_world_reference, servo_lib), flush=True)
 
         if talk:
-            warm = ", warm-started" if args.warm_start else ""
-            print(
-                f"{args.robot}: reference captured at home ({len(reference)} points); "
-                f"{_count(args.starts, 'start')} of the {args.set} set (seed {args.seed}); "
-                f"'{args.mode}' estimate{warm}, {args.sim_mode} simulation"
-                f"{', depth noise' if args.noise else ''}, control period {args.dt:g} s, "
-                f"{args.max_steps} steps max"
-            )
+            print(_intro(args, len(reference)))
         for index, (q, t, r) in enumerate(starts):
             robot.reset_joint_positions(q)
             if per_step:
@@ -189,29 +197,8 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                 stop_at_joint_limit=args.stop_at_joint_limits,
                 callback=progress if per_step else None,
             )
-            final_t, final_r = servo_lib.pose_error(
-                np.linalg.inv(robot.camera_pose()) @ T_world_reference
-            )
-            run: dict[str, Any] = {
-                "index": index,
-                "start_mm": 1000 * t,
-                "start_deg": float(np.degrees(r)),
-                "final_mm": 1000 * final_t,
-                "final_deg": float(np.degrees(final_r)),
-                "steps": len(log.records),
-                "reason": log.reason,
-                "success": bool(
-                    1000 * final_t < MAX_SERVO_ERROR_MM
-                    and np.degrees(final_r) < MAX_SERVO_ERROR_DEG
-                ),
-                "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
-                "servo_step_cpu_ms": [
-                    round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")
-                ],
-                "wall_s": log.wall_seconds,
-                "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
-                "relocalizations": int(sum(r.relocalized for r in log.records)),
-            }
+            final = servo_lib.pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
+            run = _run_summary(index, (t, r), final, log)
             runs.append(run)
             if talk:
                 print(
@@ -238,24 +225,65 @@ def run_servo_sim(args: argparse.Namespace) -> int:
                     print(f"wrote {path}")
     successes = sum(run["success"] for run in runs)
     if args.json:
-        summary = {
-            "robot": args.robot,
-            "set": args.set,
-            "seed": args.seed,
-            "mode": args.mode,
-            "warm_start": args.warm_start,
-            "sim_mode": args.sim_mode,
-            "noise": args.noise,
-            "stop_at_joint_limits": args.stop_at_joint_limits,
-            "success_mm": MAX_SERVO_ERROR_MM,
-            "success_deg": MAX_SERVO_ERROR_DEG,
-            "successes": successes,
-            "starts": runs,
-        }
-        print(json.dumps(summary, indent=1))
+        print(json.dumps(_summary(args, successes, runs), indent=1))
     elif talk:
         print(
             f"{successes}/{len(runs)} within {MAX_SERVO_ERROR_MM:g} mm and "
             f"{MAX_SERVO_ERROR_DEG:g} deg of the reference pose"
         )
     return 0 if successes == len(runs) else 1
+
+
+def _run_summary(
+    index: int, start: tuple[float, float], final: tuple[float, float], log: Any
+) -> dict[str, Any]:
+    """One start's line of the --json summary; ``start`` and ``final``: the camera's
+    distance (metres) and angle (radians) from the reference pose, ``log``: the ServoLog."""
+    (t, r), (final_t, final_r) = start, final
+    return {
+        "index": index,
+        "start_mm": 1000 * t,
+        "start_deg": float(np.degrees(r)),
+        "final_mm": 1000 * final_t,
+        "final_deg": float(np.degrees(final_r)),
+        "steps": len(log.records),
+        "reason": log.reason,
+        "success": bool(
+            1000 * final_t < MAX_SERVO_ERROR_MM and np.degrees(final_r) < MAX_SERVO_ERROR_DEG
+        ),
+        "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
+        "servo_step_cpu_ms": [round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")],
+        "wall_s": log.wall_seconds,
+        "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
+        "relocalizations": int(sum(r.relocalized for r in log.records)),
+    }
+
+
+def _summary(args: argparse.Namespace, successes: int, runs: list[dict[str, Any]]) -> dict:
+    """The --json summary: the settings, the successes and every start's line."""
+    return {
+        "robot": args.robot,
+        "set": args.set,
+        "seed": args.seed,
+        "mode": args.mode,
+        "warm_start": args.warm_start,
+        "sim_mode": args.sim_mode,
+        "noise": args.noise,
+        "stop_at_joint_limits": args.stop_at_joint_limits,
+        "success_mm": MAX_SERVO_ERROR_MM,
+        "success_deg": MAX_SERVO_ERROR_DEG,
+        "successes": successes,
+        "starts": runs,
+    }
+
+
+def _intro(args: argparse.Namespace, reference_points: int) -> str:
+    """The first line printed: the arm, the starts and the settings."""
+    warm = ", warm-started" if args.warm_start else ""
+    return (
+        f"{args.robot}: reference captured at home ({reference_points} points); "
+        f"{_count(args.starts, 'start')} of the {args.set} set (seed {args.seed}); "
+        f"'{args.mode}' estimate{warm}, {args.sim_mode} simulation"
+        f"{', depth noise' if args.noise else ''}, control period {args.dt:g} s, "
+        f"{args.max_steps} steps max"
+    )
