@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace spectral_vs::detail {
@@ -41,8 +42,7 @@ class FitnessMap {
   void record_scene(const Eigen::Array3i& low, const Eigen::Array3i& high);
   // The model voxels inside the spec (all in the block from `low` to `high`) and how many
   // of them are supported.
-  std::pair<std::size_t, std::size_t> count_inside(const Points& normals,
-                                                   const Eigen::Array3i& low,
+  std::pair<std::size_t, std::size_t> count_inside(const Points& normals, const Eigen::Array3i& low,
                                                    const Eigen::Array3i& high);
   // The distinct model voxels outside the spec.
   std::size_t count_outside();
@@ -50,13 +50,13 @@ class FitnessMap {
   const PointCloud* scene_cloud_ = nullptr;
   GridSpec spec_;
   Coverage coverage_ = Coverage::around_model;
-  bool recorded_ = false;                 // whole_scene: the directions are recorded
+  bool recorded_ = false;                  // whole_scene: the directions are recorded
   Eigen::Array3i scene_low_, scene_size_;  // the voxels the directions are recorded in
-  std::vector<Eigen::Vector3i> voxel_;  // per model point: its voxel in the spec
-  std::vector<std::uint32_t> scene_;    // per recorded voxel: directions of the scene's normals
-  std::vector<std::uint32_t> near_;     // per block voxel: the same within one voxel (when seen)
-  std::vector<std::uint8_t>
-      state_;  // per block voxel: 0 no model point, 1 unsupported, 2 supported
+  std::vector<Eigen::Vector3i> voxel_;     // per model point: its voxel in the spec
+  std::vector<std::uint32_t> scene_;       // per recorded voxel: directions of the scene's normals
+  std::vector<std::uint32_t> near_;        // per block voxel: the same within one voxel (when seen)
+  // Per block voxel: 0 no model point, 1 unsupported, 2 supported.
+  std::vector<std::uint8_t> state_;
   std::vector<std::uint64_t> outside_;  // keys of model voxels outside the spec
 };
 
