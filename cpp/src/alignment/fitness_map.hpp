@@ -15,8 +15,10 @@ namespace spectral_vs::detail {
 
 /// Fraction of the occupied voxels of a moved model that lie within one voxel of a scene
 /// point whose normal is within about 50 degrees of theirs, in [0, 1]; model voxels
-/// outside the scene's grid count, unsupported. Each scene point's normal directions are
-/// recorded once in its own voxel, and a model voxel reads the 27 around it.
+/// outside the scene's grid count, unsupported. The model's voxels are found by sorting
+/// its points by voxel; a scene point's normal directions are recorded in the 27 voxels
+/// around its own (whole_scene: a model voxel then reads one) or in its own only
+/// (around_model: a model voxel reads the 27 around it).
 class FitnessMap {
  public:
   /// Where the scene's directions are recorded: over the whole grid, once, on the first
@@ -38,26 +40,22 @@ class FitnessMap {
   double fitness(const Points& points, const Points& normals);
 
  private:
-  // Records the directions of the scene's points in the voxels from `low` to `high`.
+  // Records the directions of the scene's points in the voxels from `low` to `high`
+  // (spread over the neighbours for whole_scene).
   void record_scene(const Eigen::Array3i& low, const Eigen::Array3i& high);
-  // The model voxels inside the spec (all in the block from `low` to `high`) and how many
-  // of them are supported.
-  std::pair<std::size_t, std::size_t> count_inside(const Points& normals, const Eigen::Array3i& low,
-                                                   const Eigen::Array3i& high);
-  // The distinct model voxels outside the spec.
-  std::size_t count_outside();
+  // The model's occupied voxels (voxel_) and how many of them are supported.
+  std::pair<std::size_t, std::size_t> count(const Points& normals);
 
   const PointCloud* scene_cloud_ = nullptr;
   GridSpec spec_;
   Coverage coverage_ = Coverage::around_model;
-  bool recorded_ = false;                  // whole_scene: the directions are recorded
-  Eigen::Array3i scene_low_, scene_size_;  // the voxels the directions are recorded in
-  std::vector<Eigen::Vector3i> voxel_;     // per model point: its voxel in the spec
-  std::vector<std::uint32_t> scene_;       // per recorded voxel: directions of the scene's normals
-  std::vector<std::uint32_t> near_;        // per block voxel: the same within one voxel (when seen)
-  // Per block voxel: 0 no model point, 1 unsupported, 2 supported.
-  std::vector<std::uint8_t> state_;
-  std::vector<std::uint64_t> outside_;  // keys of model voxels outside the spec
+  bool recorded_ = false;  // whole_scene: the directions are recorded
+  // The voxels the directions are recorded in: from scene_low_, scene_size_ of them.
+  Eigen::Array3i scene_low_ = Eigen::Array3i::Zero(), scene_size_ = Eigen::Array3i::Zero();
+  std::vector<Eigen::Vector3i> voxel_;  // per model point: its voxel in the spec
+  std::vector<std::uint32_t> scene_;    // per recorded voxel: directions of the scene's normals
+  // Scratch: (voxel key, nearest direction) of every model point, sorted by voxel.
+  std::vector<std::pair<std::uint64_t, int>> seen_;
 };
 
 }  // namespace spectral_vs::detail
