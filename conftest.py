@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from spectral_vs.data.scenes import BoxWithBall, box_with_ball
+
 ROOT = Path(__file__).resolve().parent
 
 
@@ -30,20 +32,21 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(2024)
 
 
+#: The tests' object: a 24 x 12 x 8 cm box with a 6 cm ball beside it, both whole
+#: (asymmetric); the same as tests/cpp/test_support.hpp's.
+BOX_AND_SPHERE = BoxWithBall(
+    half=(0.12, 0.06, 0.04),
+    ball_centre=(0.10, 0.10, 0.0),
+    ball_radius=0.06,
+    offset=(0.0, 0.0, 0.0),
+    bottom=True,
+    hidden_dropped=False,
+)
+
+
 def box_and_sphere(rng: np.random.Generator, samples: int = 6000) -> tuple[np.ndarray, np.ndarray]:
-    """Points and outward normals of a 0.25 m box with a sphere beside it (asymmetric)."""
-    half = samples // 2
-    n_sphere = rng.normal(size=(half, 3))
-    n_sphere /= np.linalg.norm(n_sphere, axis=1, keepdims=True)
-    p_sphere = np.array([0.10, 0.10, 0.0]) + 0.06 * n_sphere
-    u = rng.uniform(-1, 1, size=(samples - half, 3))
-    axis = rng.integers(0, 3, samples - half)
-    rows = np.arange(samples - half)
-    u[rows, axis] = np.sign(u[rows, axis])
-    p_box = u * np.array([0.12, 0.06, 0.04])
-    n_box = np.zeros_like(u)
-    n_box[rows, axis] = u[rows, axis]
-    return np.vstack([p_sphere, p_box]), np.vstack([n_sphere, n_box])
+    """``samples`` points and outward normals of BOX_AND_SPHERE, half on the sphere."""
+    return box_with_ball(rng, samples=samples, shape=BOX_AND_SPHERE)
 
 
 @contextmanager

@@ -83,6 +83,91 @@ def _set_scale(axis: Any, values: np.ndarray, from_zero: bool = False) -> None:
         axis.ticklabel_format(axis="y", useOffset=False)
 
 
+def _series(history: list[Any], name: str) -> np.ndarray:
+    """One field of every iteration's record."""
+    return np.array([getattr(step, name) for step in history], dtype=float)
+
+
+def _plot_stop_rule(stop: Any, history: list[Any], eps_g: float, voxel_size: float | None) -> None:
+    """The two terms of the stop rule (eq. 17), their sum and the tolerance."""
+    iterations = np.arange(1, len(history) + 1)
+    step = _series(history, "translation_step")
+    gradient = _series(history, "rotation_gradient")
+    step_label = "translation step (voxels)"
+    if voxel_size:
+        step_label = f"translation step (voxels of {1000 * voxel_size:g} mm)"
+    stop.plot(iterations, step, "o-", color="tab:blue", markersize=3, label=step_label)
+    stop.plot(
+        iterations,
+        gradient,
+        "s-",
+        color="tab:purple",
+        markersize=3,
+        label=r"$|\nabla C_r|$ (per radian)",
+    )
+    stop.plot(iterations, step + gradient, "-", color="black", linewidth=1.5, label="sum (eq. 17)")
+    stop.axhline(
+        eps_g, color="tab:red", linestyle="--", label=rf"tolerance $\epsilon_g$ = {eps_g:g}"
+    )
+    _set_scale(stop, np.concatenate([step, gradient, [eps_g]]))
+    stop.set_title("stop rule: gradient norms")
+    stop.set_xlabel("iteration")
+    stop.set_ylabel("norm")
+    stop.legend(fontsize="small", loc="best")
+
+
+def _plot_errors(
+    last: Any, poses: list[np.ndarray], ground_truth: np.ndarray, center: np.ndarray | None
+) -> None:
+    """The rotation and translation errors of ``poses`` (the start first)."""
+    errors = np.array(
+        [
+            (e.rotation_deg, e.translation_mm)
+            for e in (pose_error(T, ground_truth, center=center) for T in poses)
+        ],
+        dtype=float,
+    )
+    steps = np.arange(len(poses))
+    rotation_line = last.plot(
+        steps, errors[:, 0], "o-", color="tab:purple", markersize=4, label="rotation (left)"
+    )
+    last.set_ylabel("rotation error (degrees)", color="tab:purple")
+    right = last.twinx()
+    translation_line = right.plot(
+        steps, errors[:, 1], "s--", color="tab:blue", markersize=3, label="translation (right)"
+    )
+    last.legend(handles=rotation_line + translation_line, fontsize="small")
+    right.set_ylabel("translation error (mm)", color="tab:blue")
+    _set_scale(last, errors[:, 0], from_zero=True)
+    _set_scale(right, errors[:, 1], from_zero=True)
+    last.set_title("error against the ground truth (0 = start)")
+
+
+def _plot_similarity(last: Any, history: list[Any]) -> None:
+    """The EGI correlation and the phase-correlation peak of every iteration."""
+    iterations = np.arange(1, len(history) + 1)
+    last.plot(
+        iterations,
+        _series(history, "correlation"),
+        "o-",
+        color="tab:purple",
+        markersize=3,
+        label="EGI correlation $C_r$",
+    )
+    last.plot(
+        iterations,
+        _series(history, "translation_peak"),
+        "s-",
+        color="tab:blue",
+        markersize=3,
+        label="phase-correlation peak",
+    )
+    last.set_ylim(min(0.0, float(_series(history, "correlation").min())) - 0.05, 1.05)
+    last.set_ylabel("dimensionless")
+    last.set_title("similarity")
+    last.legend(fontsize="small")
+
+
 def plot_convergence(
     result: AlignResult,
     path: str | os.PathLike[str],
@@ -135,90 +220,26 @@ def plot_convergence(
         figure.savefig(path)
         return
 
-    def series(name: str) -> np.ndarray:
-        return np.array([getattr(step, name) for step in history], dtype=float)
-
-    j_t = series("translation_cost")
+    j_t = _series(history, "translation_cost")
     cost_t.plot(iterations, j_t, "o-", color="tab:blue", markersize=3)
     _set_scale(cost_t, j_t)
     cost_t.set_title("translation cost $J_t$ (eq. 9)")
     cost_t.set_ylabel("$J_t$ (voxel grid units)")
 
-    j_r = series("rotation_cost")
+    j_r = _series(history, "rotation_cost")
     cost_r.plot(iterations, j_r, "o-", color="tab:purple", markersize=3)
     _set_scale(cost_r, j_r)
     cost_r.set_title("rotation cost $J_r$ (eq. 16)")
     cost_r.set_ylabel("$J_r$ (normalised EGI units)")
 
-    step = series("translation_step")
-    gradient = series("rotation_gradient")
-    step_label = "translation step (voxels)"
-    if voxel_size:
-        step_label = f"translation step (voxels of {1000 * voxel_size:g} mm)"
-    stop.plot(iterations, step, "o-", color="tab:blue", markersize=3, label=step_label)
-    stop.plot(
-        iterations,
-        gradient,
-        "s-",
-        color="tab:purple",
-        markersize=3,
-        label=r"$|\nabla C_r|$ (per radian)",
-    )
-    stop.plot(iterations, step + gradient, "-", color="black", linewidth=1.5, label="sum (eq. 17)")
-    stop.axhline(
-        eps_g, color="tab:red", linestyle="--", label=rf"tolerance $\epsilon_g$ = {eps_g:g}"
-    )
-    _set_scale(stop, np.concatenate([step, gradient, [eps_g]]))
-    stop.set_title("stop rule: gradient norms")
-    stop.set_xlabel("iteration")
-    stop.set_ylabel("norm")
-    stop.legend(fontsize="small", loc="best")
-
+    _plot_stop_rule(stop, history, eps_g, voxel_size)
     if ground_truth is not None:
         start = np.eye(4) if initial_T is None else np.asarray(initial_T, dtype=float)
-        poses = [start] + [np.asarray(s.T_scene_model) for s in history]
-        errors = np.array(
-            [
-                (e.rotation_deg, e.translation_mm)
-                for e in (pose_error(T, ground_truth, center=center) for T in poses)
-            ],
-            dtype=float,
+        _plot_errors(
+            last, [start] + [np.asarray(s.T_scene_model) for s in history], ground_truth, center
         )
-        steps = np.arange(len(poses))
-        rotation_line = last.plot(
-            steps, errors[:, 0], "o-", color="tab:purple", markersize=4, label="rotation (left)"
-        )
-        last.set_ylabel("rotation error (degrees)", color="tab:purple")
-        right = last.twinx()
-        translation_line = right.plot(
-            steps, errors[:, 1], "s--", color="tab:blue", markersize=3, label="translation (right)"
-        )
-        last.legend(handles=rotation_line + translation_line, fontsize="small")
-        right.set_ylabel("translation error (mm)", color="tab:blue")
-        _set_scale(last, errors[:, 0], from_zero=True)
-        _set_scale(right, errors[:, 1], from_zero=True)
-        last.set_title("error against the ground truth (0 = start)")
     else:
-        last.plot(
-            iterations,
-            series("correlation"),
-            "o-",
-            color="tab:purple",
-            markersize=3,
-            label="EGI correlation $C_r$",
-        )
-        last.plot(
-            iterations,
-            series("translation_peak"),
-            "s-",
-            color="tab:blue",
-            markersize=3,
-            label="phase-correlation peak",
-        )
-        last.set_ylim(min(0.0, float(series("correlation").min())) - 0.05, 1.05)
-        last.set_ylabel("dimensionless")
-        last.set_title("similarity")
-        last.legend(fontsize="small")
+        _plot_similarity(last, history)
     last.set_xlabel("iteration")
     first = 0 if ground_truth is not None else 1
     for axis in (cost_t, cost_r, stop, last):
@@ -290,6 +311,32 @@ def _display_frame(
     return rows, ["x' (m)", "y' (m)", "up (m)"], "the main plane's normal"
 
 
+def _poses_between(
+    result: AlignResult, start: np.ndarray, steps: int, model_points: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """The iterations drawn between the start and the end (about ``steps`` of them, as
+    indices and poses) and the path of the model's centroid through every pose."""
+    history = [np.asarray(step.T_scene_model) for step in result.history]
+    final = np.asarray(result.T_scene_model)
+    picks = np.unique(np.linspace(0, len(history) - 1, steps + 2).round().astype(int))[1:-1]
+    between = [history[i] for i in picks] if len(history) > 2 else []
+    centroid = model_points.mean(axis=0)
+    path_points = np.array([_moved(centroid[None], T)[0] for T in [start, *history, final]])
+    return picks, between, path_points
+
+
+def _two_panel_figure(title: str | None) -> tuple[Any, Any, Any]:
+    """A figure with a 3D view (drawn in order: the model over the scene) and a 2D view."""
+    figure = _new_figure(13.0, 6.2)
+    figure.get_layout_engine().set(w_pad=0.2)
+    view3d = figure.add_subplot(1, 2, 1, projection="3d")
+    view3d.computed_zorder = False  # draw in order: the model over the scene
+    view2d = figure.add_subplot(1, 2, 2)
+    if title:
+        figure.suptitle(title)
+    return figure, view3d, view2d
+
+
 def render_alignment(
     model: PointCloud | np.ndarray,
     scene: PointCloud | np.ndarray,
@@ -332,23 +379,15 @@ def render_alignment(
     model_points = _subsample(_points(model), max_points, rng)
     scene_points = _points(scene)
     start = np.eye(4) if initial_T is None else np.asarray(initial_T, dtype=float)
-    history = [np.asarray(step.T_scene_model) for step in result.history]
     final = np.asarray(result.T_scene_model)
-    picks = np.unique(np.linspace(0, len(history) - 1, steps + 2).round().astype(int))[1:-1]
-    between = [history[i] for i in picks] if len(history) > 2 else []
-    centroid = model_points.mean(axis=0)
-    path_points = np.array([_moved(centroid[None], T)[0] for T in [start, *history, final]])
+    picks, between, path_points = _poses_between(result, start, steps, model_points)
     initial = _moved(model_points, start)
     aligned = _moved(model_points, final)
     size = float(np.max(np.ptp(model_points, axis=0)))
 
     # Up from the scene around the model's first and last pose, then the view in that frame.
-    middle, half = _view_box([initial, aligned, path_points], size)
-    near = np.linalg.norm(scene_points - middle, axis=1) <= half
-    normals = None
-    if isinstance(scene, PointCloud) and scene.has_normals:
-        normals = np.asarray(scene.normals)[near]
-    rows, labels, up_name = _display_frame(scene_points[near], normals)
+    poses = [initial, aligned, path_points]
+    rows, labels, up_name = _upright_frame(scene, scene_points, poses, size)
 
     def display(points: np.ndarray) -> np.ndarray:
         return points @ rows.T
@@ -357,13 +396,7 @@ def render_alignment(
     shown = display(scene_points)
     shown = _subsample(shown[np.all(np.abs(shown - middle) <= half, axis=1)], 2 * max_points, rng)
 
-    figure = _new_figure(13.0, 6.2)
-    figure.get_layout_engine().set(w_pad=0.2)
-    view3d = figure.add_subplot(1, 2, 1, projection="3d")
-    view3d.computed_zorder = False  # draw in order: the model over the scene
-    view2d = figure.add_subplot(1, 2, 2)
-    if title:
-        figure.suptitle(title)
+    figure, view3d, view2d = _two_panel_figure(title)
 
     def draw(points: np.ndarray, **style: Any) -> None:
         points = display(points)
@@ -389,6 +422,35 @@ def render_alignment(
     view3d.plot(*path_shown.T, "o-", label="path of the model centroid", **style)
     view2d.plot(path_shown[:, 0], path_shown[:, 1], "o-", **style)
 
+    _frame_views(view3d, view2d, (middle, half), labels, up_name)
+    figure.savefig(path)
+
+
+def _upright_frame(
+    scene: PointCloud | np.ndarray,
+    scene_points: np.ndarray,
+    model_poses: list[np.ndarray],
+    size: float,
+) -> tuple[np.ndarray, list[str], str]:
+    """The display frame (_display_frame) from the scene in the view box (_view_box, of
+    ``size``) around the model's poses: up is the normal of the scene's main plane there."""
+    middle, half = _view_box(model_poses, size)
+    near = np.linalg.norm(scene_points - middle, axis=1) <= half
+    normals = None
+    if isinstance(scene, PointCloud) and scene.has_normals:
+        normals = np.asarray(scene.normals)[near]
+    return _display_frame(scene_points[near], normals)
+
+
+def _frame_views(
+    view3d: Any,
+    view2d: Any,
+    box: tuple[np.ndarray, float],
+    labels: list[str],
+    up_name: str,
+) -> None:
+    """Limits, labels and titles of both views over the cube ``box`` (middle, half-width)."""
+    middle, half = box
     for i, axis in enumerate("xyz"):
         getattr(view3d, f"set_{axis}lim")(middle[i] - half, middle[i] + half)
         getattr(view3d, f"set_{axis}label")(labels[i])
@@ -405,7 +467,6 @@ def render_alignment(
     legend = view3d.legend(loc="upper left", fontsize="small", markerscale=4)
     for handle in legend.legend_handles:
         handle.set_alpha(1.0)
-    figure.savefig(path)
 
 
 def plot_servo(

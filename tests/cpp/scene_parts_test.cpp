@@ -1,6 +1,6 @@
 // The aligner's internals: the range image that checks a pose against what a single
-// view saw, the connected parts of a cluttered scene, its support plane, and the final
-// point-to-plane ICP.
+// view saw, the connected parts of a cluttered scene, its support plane, the final
+// point-to-plane ICP, and the fitness of a pose.
 
 #include "alignment/icp_refinement.hpp"
 #include "alignment/range_image.hpp"
@@ -12,7 +12,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <map>
 #include <random>
 #include <set>
 #include <vector>
@@ -330,6 +332,88 @@ TEST(BoundedGrid, KeepsTheSceneInReachOfTheModel) {
   // None in reach: the whole scene (the search then fails as before, not on an empty grid).
   const Eigen::AlignedBox3d far(Eigen::Vector3d::Constant(10.0), Eigen::Vector3d::Constant(11.0));
   EXPECT_EQ(points_in_reach(scene, far, reach).rows(), scene.rows());
+}
+
+}  // namespace
+}  // namespace spectral_vs::detail
+
+namespace spectral_vs::detail {
+namespace {
+
+// The fitness by its definition, pair by pair: a model voxel is supported when one of its
+// points and a scene point at most one voxel away on each axis have normals that agree:
+// the model normal's nearest of the 26 directions to a voxel's neighbours is the scene
+// normal's nearest, or within 50 degrees of the scene normal. Model voxels outside the
+// grid count, unsupported.
+double brute_force_fitness(const PointCloud& scene, const GridSpec& spec, const Points& points,
+                           const Points& normals) {
+  std::vector<Eigen::Vector3d> directions;
+  for (int x = -1; x <= 1; ++x)
+    for (int y = -1; y <= 1; ++y)
+      for (int z = -1; z <= 1; ++z)
+        if (x || y || z) directions.push_back(Eigen::Vector3d(x, y, z).normalized());
+  const auto nearest = [&](const Eigen::Vector3d& n) {
+    std::size_t best = 0;
+    for (std::size_t d = 1; d < directions.size(); ++d)
+      if (directions[d].dot(n) > directions[best].dot(n)) best = d;
+    return best;
+  };
+  const auto voxel = [&](const Eigen::Vector3d& p) {
+    return Eigen::Vector3i(((p - spec.origin) / spec.resolution).array().floor().cast<int>());
+  };
+  std::map<std::array<int, 3>, bool> supported;  // per model voxel
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    const Eigen::Vector3i v = voxel(points.row(i).transpose());
+    bool& support = supported[{v.x(), v.y(), v.z()}];
+    if (!spec.contains(v)) continue;
+    const Eigen::Vector3d& d = directions[nearest(normals.row(i).transpose())];
+    for (Eigen::Index j = 0; j < scene.points().rows() && !support; ++j) {
+      const Eigen::Vector3i u = voxel(scene.points().row(j).transpose());
+      const Eigen::Vector3d m = scene.normals().row(j).transpose();
+      support = (u - v).cwiseAbs().maxCoeff() <= 1 &&
+                (d.dot(m) > 0.6428 || d == directions[nearest(m)]);  // cos(50 degrees)
+    }
+  }
+  const auto count = std::count_if(supported.begin(), supported.end(),
+                                   [](const auto& voxel_support) { return voxel_support.second; });
+  return double(count) / double(supported.size());
+}
+
+// The one fitness, recorded over the whole scene (align()'s SceneMap) or around the model
+// only (ModelAligner), against the definition: the box and ball placed, moved half a
+// voxel, turned by 40 degrees, and reaching out of the scene's grid.
+TEST(Fitness, IsTheShareOfModelVoxelsWithAgreeingSceneNormalsNearby) {
+  std::mt19937 rng(21);
+  const PointCloud sample = test::box_and_sphere(3000, rng);
+  std::normal_distribution<double> noise(0.0, 5e-4);
+  Points jittered = sample.points();
+  for (Eigen::Index i = 0; i < jittered.rows(); ++i)
+    jittered.row(i) += Eigen::RowVector3d(noise(rng), noise(rng), noise(rng));
+  const PointCloud scene(jittered, sample.normals());
+  const PointCloud model = test::box_and_sphere(1500, rng);
+  const double voxel = 0.01;
+  const GridSpec spec = FitnessMap::spec_of(scene, voxel, GridLimits{});
+  const SceneMap whole(scene, scene, voxel, GridLimits{});
+  FitnessMap around;
+  around.set_scene(scene, spec, FitnessMap::Coverage::around_model);
+  Transform turned = Transform::Identity();
+  turned.topLeftCorner<3, 3>() = exp_so3(Eigen::Vector3d(0.0, 0.0, 40.0 * M_PI / 180.0));
+  const std::vector<Transform> poses = {Transform::Identity(),
+                                        test::translation(Eigen::Vector3d(0.005, 0.0, 0.003)),
+                                        turned, test::translation(Eigen::Vector3d(0.2, 0.0, 0.0))};
+  std::vector<double> scores;
+  for (const Transform& pose : poses) {
+    const PointCloud moved = model.transformed(pose);
+    const double expected = brute_force_fitness(scene, spec, moved.points(), moved.normals());
+    EXPECT_EQ(whole.fitness(moved.points(), moved.normals()), expected);
+    EXPECT_EQ(around.fitness(moved.points(), moved.normals()), expected);
+    scores.push_back(expected);
+  }
+  EXPECT_GT(scores[0], 0.9);        // in place
+  EXPECT_GT(scores[1], 0.9);        // half a voxel off: still within one voxel
+  EXPECT_LT(scores[2], scores[0]);  // turned: the box's faces no longer agree
+  EXPECT_LT(scores[3], 0.5);        // mostly outside the scene's grid
+  EXPECT_EQ(around.fitness(Points(0, 3), Points(0, 3)), 0.0);
 }
 
 }  // namespace

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 import spectral_vs as svs
+from spectral_vs.data import scenes
+from spectral_vs.data.scenes import BoxWithBall
 
 
 def rotation(axis: np.ndarray, angle_deg: float) -> np.ndarray:
@@ -16,29 +18,21 @@ def rotation(axis: np.ndarray, angle_deg: float) -> np.ndarray:
     return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
 
 
+#: A 24 x 12 x 8 cm box with a 6 cm ball on one face.
+BOX_WITH_BALL = BoxWithBall(
+    half=(0.12, 0.06, 0.04), ball_centre=(0.07, 0.0, 0.07), ball_radius=0.03, offset=(0, 0, 0)
+)
+
+
 def box_with_ball(rng: np.random.Generator, samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """A 0.24 x 0.12 x 0.08 m box sampled by area, with a 6 cm ball on one face."""
-    half = np.array([0.12, 0.06, 0.04])
-    areas = np.array([half[1] * half[2], half[0] * half[2], half[0] * half[1]])
-    axis = rng.choice(3, size=samples, p=areas / areas.sum())
-    u = rng.uniform(-1, 1, size=(samples, 3))
-    rows = np.arange(samples)
-    u[rows, axis] = np.sign(u[rows, axis])
-    normals = np.zeros((samples, 3))
-    normals[rows, axis] = u[rows, axis]
-    points = u * half
-    ball = rng.normal(size=(samples // 2, 3))
-    ball /= np.linalg.norm(ball, axis=1, keepdims=True)
-    ball_points = np.array([0.07, 0.0, 0.04 + 0.03]) + 0.03 * ball
-    keep = ball_points[:, 2] > 0.04  # the part of the ball above the box's top face
-    return np.vstack([points, ball_points[keep]]), np.vstack([normals, ball[keep]])
+    return scenes.box_with_ball(rng, samples=samples, shape=BOX_WITH_BALL)
 
 
 def make_case(rng, angle_deg):
-    points, normals = box_with_ball(rng, 6000)
+    points, normals = box_with_ball(rng, 9000)
     R = rotation(rng.normal(size=3), angle_deg)
     t = rng.uniform(-0.1, 0.1, size=3)
-    scene_points, scene_normals = box_with_ball(rng, 6000)  # an independent resampling
+    scene_points, scene_normals = box_with_ball(rng, 9000)  # an independent resampling
     scene_points = scene_points + rng.normal(0, 0.001, scene_points.shape)
     model = svs.PointCloud(points, normals)
     scene = svs.PointCloud(scene_points @ R.T + t, scene_normals @ R.T)
@@ -106,7 +100,7 @@ def test_max_iterations_reports_not_converged():
 
 
 def test_arrays_without_normals_are_accepted(rng):
-    points, _ = box_with_ball(rng, 4000)
+    points, _ = box_with_ball(rng, 6000)
     result = svs.align(points, points + np.array([0.01, 0.0, 0.0]), sensor_origin=(0.0, 0.0, 1.0))
     assert np.linalg.norm(np.asarray(result.T_scene_model)[:3, 3] - [0.01, 0, 0]) < 0.002
 

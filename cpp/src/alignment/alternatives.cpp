@@ -88,19 +88,14 @@ Transform refine_translation(const PointCloud& model, const IcpScene& scene, Tra
 }
 
 // The candidate refined as the returned pose was: point-to-plane ICP with pairs within a
-// voxel, then within 0.4 voxel.
-Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, Transform T,
+// voxel, then within kIcpFineDistance voxel.
+Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, const Transform& T,
                         double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
                         int max_iterations = IcpSettings{}.max_iterations) {
   IcpSettings icp;
   icp.viewpoint = viewpoint;
   icp.max_iterations = max_iterations;
-  for (const double distance : {1.0, 0.4}) {
-    icp.max_distance = distance * voxel_size;
-    const IcpOutcome outcome = refine_point_to_plane(model, verifier.fine_grid(), T, icp);
-    if (outcome.iterations > 0) T = outcome.T_scene_model;
-  }
-  return T;
+  return refine_in_two_stages(model, verifier.fine_grid(), T, voxel_size, icp).T_scene_model;
 }
 
 // T_scene_model composed with the turn R of the model about its centroid c.
@@ -161,6 +156,57 @@ bool passes_screening(const PointCloud& sparse, const Verifier& verifier,
   return verifier.verify(sparse, screened).confidence >= sparse_confidence - kScreenMargin;
 }
 
+// The poses tried as alternatives to T (a pose of the model, whose centroid is c): T
+// turned by the model's near-symmetries, by steps about its flat EGI axis, and the
+// global search's first hypotheses as they are.
+std::vector<Candidate> proposed_poses(const Transform& T, const Eigen::Vector3d& c,
+                                      const AlternativeSources& sources, int threads) {
+  std::vector<Candidate> poses;
+  try {
+    So3Correlation self(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
+                        true);
+    So3SearchParams search;
+    search.candidates = kSelfCandidates;
+    search.threads = threads;
+    RotationRefineParams refine;
+    for (const RotationCandidate& candidate : so3_search(
+             sources.model_coefficients, sources.model_coefficients, sources.bandwidth, search)) {
+      const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
+      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
+        poses.push_back({turned(T, R, c), {}, false, 0.0});
+      }
+    }
+  } catch (const std::invalid_argument&) {
+    // A uniform EGI (a sphere's): no rotation stands out.
+  }
+  if (sources.flat_axis) {
+    const int count = static_cast<int>(std::lround(2.0 * M_PI / kAxisStep));
+    for (int k = 1; k < count; ++k) {
+      const double angle = double(k) * kAxisStep;
+      poses.push_back({turned(T, exp_so3(angle * *sources.flat_axis), c), {}, true, angle});
+    }
+  }
+  for (std::size_t h = 0; h < std::min(kHypotheses, sources.hypotheses.size()); ++h) {
+    poses.push_back({sources.hypotheses[h], {}, false, 0.0});
+  }
+  return poses;
+}
+
+// A kept candidate as the result reports it, with how far it is from T.
+AlignAlternative alternative_of(const Candidate& candidate, const Transform& T,
+                                const Eigen::Vector3d& c) {
+  AlignAlternative alternative;
+  alternative.T_scene_model = candidate.T;
+  alternative.confidence = candidate.verification.confidence;
+  alternative.inliers = candidate.verification.inliers;
+  alternative.inlier_rmse = candidate.verification.inlier_rmse;
+  alternative.rotation_apart =
+      rotation_distance(candidate.T.topLeftCorner<3, 3>(), T.topLeftCorner<3, 3>());
+  const Eigen::Vector4d h(c.x(), c.y(), c.z(), 1.0);
+  alternative.translation_apart = ((candidate.T - T) * h).head<3>().norm();
+  return alternative;
+}
+
 }  // namespace
 
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
@@ -172,41 +218,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   const Eigen::Vector3d c = model.centroid();
   const Transform& T = result.T_scene_model;
 
-  std::vector<Transform> poses;
-  std::vector<char> turns;
-  std::vector<double> angles;  // of the turns about the flat axis, 0 for the others
-  try {
-    So3Correlation self(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
-                        true);
-    So3SearchParams search;
-    search.candidates = kSelfCandidates;
-    search.threads = params.threads;
-    RotationRefineParams refine;
-    for (const RotationCandidate& candidate : so3_search(
-             sources.model_coefficients, sources.model_coefficients, sources.bandwidth, search)) {
-      const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
-      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
-        poses.push_back(turned(T, R, c));
-        turns.push_back(0);
-        angles.push_back(0.0);
-      }
-    }
-  } catch (const std::invalid_argument&) {
-    // A uniform EGI (a sphere's): no rotation stands out.
-  }
-  if (sources.flat_axis) {
-    const int count = static_cast<int>(std::lround(2.0 * M_PI / kAxisStep));
-    for (int k = 1; k < count; ++k) {
-      poses.push_back(turned(T, exp_so3(double(k) * kAxisStep * *sources.flat_axis), c));
-      turns.push_back(1);
-      angles.push_back(double(k) * kAxisStep);
-    }
-  }
-  for (std::size_t h = 0; h < std::min(kHypotheses, sources.hypotheses.size()); ++h) {
-    poses.push_back(sources.hypotheses[h]);
-    turns.push_back(0);
-    angles.push_back(0.0);
-  }
+  const std::vector<Candidate> proposed = proposed_poses(T, c, sources, params.threads);
 
   // The likeliest by inliers first, counted on every kSparseStride-th model point (the
   // nearest-point queries of every candidate are most of this stage's time), then refined
@@ -215,10 +227,9 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   const PoseVerification sparse_returned = verifier.verify(sparse, T);
   const int sparse_inliers = sparse_returned.inliers;
   std::vector<Candidate> candidates;
-  for (std::size_t k = 0; k < poses.size(); ++k) {
-    const Transform& pose = poses[k];
-    if (!apart(pose, T, c)) continue;
-    Candidate candidate{pose, verifier.verify(sparse, pose), turns[k] != 0, angles[k]};
+  for (Candidate candidate : proposed) {
+    if (!apart(candidate.T, T, c)) continue;
+    candidate.verification = verifier.verify(sparse, candidate.T);
     if (candidate.verification.inliers >= kMinInlierShare * sparse_inliers)
       candidates.push_back(candidate);
   }
@@ -260,16 +271,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
         result.alternatives.begin(), result.alternatives.end(),
         [&](const AlignAlternative& kept) { return apart(candidate.T, kept.T_scene_model, c); });
     if (!distinct) continue;
-    AlignAlternative alternative;
-    alternative.T_scene_model = candidate.T;
-    alternative.confidence = candidate.verification.confidence;
-    alternative.inliers = candidate.verification.inliers;
-    alternative.inlier_rmse = candidate.verification.inlier_rmse;
-    alternative.rotation_apart =
-        rotation_distance(candidate.T.topLeftCorner<3, 3>(), T.topLeftCorner<3, 3>());
-    const Eigen::Vector4d h(c.x(), c.y(), c.z(), 1.0);
-    alternative.translation_apart = ((candidate.T - T) * h).head<3>().norm();
-    result.alternatives.push_back(alternative);
+    result.alternatives.push_back(alternative_of(candidate, T, c));
   }
   result.ambiguous = !result.alternatives.empty();
 }

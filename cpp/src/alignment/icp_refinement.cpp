@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace spectral_vs::detail {
@@ -152,6 +153,38 @@ IcpOutcome refine_point_to_plane(const PointCloud& model, const IcpScene& grid,
     if (step.head<3>().norm() < 1e-4 && step.tail<3>().norm() < 2e-5) break;
   }
   return outcome;
+}
+
+namespace {
+
+template <class Scene>
+IcpOutcome two_stages(const PointCloud& model, const Scene& scene, const Transform& T_scene_model,
+                      double voxel_size, IcpSettings settings, bool fine) {
+  IcpOutcome outcome;
+  outcome.T_scene_model = T_scene_model;
+  for (int stage = 0; stage < (fine ? 2 : 1); ++stage) {
+    settings.max_distance = (stage == 0 ? 1.0 : kIcpFineDistance) * voxel_size;
+    const IcpOutcome step = refine_point_to_plane(model, scene, outcome.T_scene_model, settings);
+    outcome.pairs = step.pairs;
+    if (step.iterations == 0) break;
+    outcome.T_scene_model = step.T_scene_model;
+    outcome.iterations += step.iterations;
+  }
+  return outcome;
+}
+
+}  // namespace
+
+IcpOutcome refine_in_two_stages(const PointCloud& model, const IcpScene& scene,
+                                const Transform& T_scene_model, double voxel_size,
+                                IcpSettings settings, bool fine) {
+  return two_stages(model, scene, T_scene_model, voxel_size, std::move(settings), fine);
+}
+
+IcpOutcome refine_in_two_stages(const PointCloud& model, const PointCloud& scene,
+                                const Transform& T_scene_model, double voxel_size,
+                                IcpSettings settings, bool fine) {
+  return two_stages(model, scene, T_scene_model, voxel_size, std::move(settings), fine);
 }
 
 }  // namespace spectral_vs::detail

@@ -68,12 +68,13 @@ struct ModelAligner::Impl {
   Transform transform_of(const Pose& pose) const { return moving_model->transform_of(pose); }
   const Points& move(const Pose& pose) { return moving_model->move(pose); }
 
-  // The fitness as align() scores it, built for this pose only.
-  double fitness(const PointCloud& scene, const GridSpec& map, const Pose& pose) {
+  // The fitness as align() scores it, against the scene of fitness_map (set_scene) or,
+  // for a declared view, what the sensor saw of `scene`.
+  double fitness(const PointCloud& scene, const Pose& pose) {
     const Points& normals = moving_model->turned_normals(pose);
     const Points& points = move(pose);
     const std::optional<Eigen::Vector3d> viewpoint = detail::declared_viewpoint(params);
-    if (!viewpoint) return fitness_map.fitness(scene, map, points, normals);
+    if (!viewpoint) return fitness_map.fitness(points, normals);
     const detail::RangeImage view(scene, *viewpoint,
                                   0.5 * params.scene.voxel_size);  // as align() makes it
     return view.check(points, normals, params.scene.voxel_size).fitness();
@@ -148,7 +149,9 @@ struct ModelAligner::Impl {
                                true);
     timings.scene_coefficients = seconds_since(t);
     t = Clock::now();
+    // Built for the final pose only: the scene's directions around the model.
     const GridSpec map = detail::FitnessMap::spec_of(scene, params.scene.voxel_size, params.limits);
+    fitness_map.set_scene(scene, map, detail::FitnessMap::Coverage::around_model);
     timings.scene_map = seconds_since(t);
 
     t = Clock::now();
@@ -169,11 +172,11 @@ struct ModelAligner::Impl {
     timings.translation = loop_timings.translation;
     timings.records = loop_timings.records;
     t = Clock::now();
-    result.fitness = fitness(scene, map, pose);
+    result.fitness = fitness(scene, pose);
     if (params.verification.verify) {
-      detail::set_verification(result, detail::Verifier(scene, params.scene.voxel_size,
-                                                        detail::declared_viewpoint(params))
-                                           .verify(model, result.T_scene_model));
+      detail::set_verification(
+          result, detail::Verifier(scene, params.scene.voxel_size, detail::declared_viewpoint(params))
+                      .verify(model, result.T_scene_model));
     }
     timings.fitness = seconds_since(t);
     return result;

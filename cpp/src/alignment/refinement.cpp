@@ -22,13 +22,6 @@ constexpr double kPolishMinDensity = 2.0;  // model points per occupied voxel
 // The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole scene;
 // kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
 constexpr double kIcpFitnessLoss = 0.05;
-// Pairs within a voxel first (the spectral result may be most of one off), then, for a
-// densely sampled model, within this share of one, which leaves out pairs that only the
-// noise brought near: on single views 0.34 to 0.22 degree and 0.29 to 0.13 mm at the
-// median, against 0.25 and 0.6. On a sparse scan (one point per voxel) the nearest points
-// are mostly farther than that, and the few pairs left turned the bunny scan 0.3 to 4
-// degrees.
-constexpr double kIcpFineDistance = 0.4;
 
 // The EGI of the scene points in a window: in clutter, the object's own normals
 // rather than the whole scene's.
@@ -243,17 +236,11 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
                      AlignResult& result) {
   detail::IcpSettings settings;
   settings.viewpoint = problem.viewpoint;
-  Transform T_scene_model = result.T_scene_model;
-  int iterations = 0;
-  const int stages = problem.dense_model ? 2 : 1;
-  for (int stage = 0; stage < stages; ++stage) {
-    settings.max_distance = (stage == 0 ? 1.0 : kIcpFineDistance) * problem.params.scene.voxel_size;
-    const detail::IcpOutcome outcome =
-        detail::refine_point_to_plane(model, scene, T_scene_model, settings);
-    if (outcome.iterations == 0) break;
-    T_scene_model = outcome.T_scene_model;
-    iterations += outcome.iterations;
-  }
+  // The fine stage only for a densely sampled model (kIcpFineDistance).
+  const detail::IcpOutcome icp = detail::refine_in_two_stages(
+      model, scene, result.T_scene_model, problem.params.scene.voxel_size, settings, problem.dense_model);
+  const Transform& T_scene_model = icp.T_scene_model;
+  const int iterations = icp.iterations;
   if (iterations == 0) return;
   const double fitness =
       problem.model.fitness(problem.scene, problem.view, problem.model.pose_of(T_scene_model),

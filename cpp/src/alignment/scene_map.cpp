@@ -18,10 +18,6 @@ Eigen::AlignedBox3d cube(const Eigen::Vector3d& centre, double half_width) {
           centre + Eigen::Vector3d::Constant(half_width)};
 }
 
-std::size_t linear(const GridSpec& spec, const Eigen::Vector3i& v) {
-  return (std::size_t(v.x()) * spec.dims.y() + v.y()) * spec.dims.z() + v.z();
-}
-
 void voxelize_subset(const PointCloud& cloud, const std::vector<Eigen::Index>& rows,
                      const GridSpec& spec, Occupancy occupancy, VoxelGrid& grid,
                      const GridLimits& limits) {
@@ -130,41 +126,13 @@ GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const Gri
 
 SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
                    const GridLimits& limits)
-    : scene_(&scene), spec_(scene_map_spec(evidence, voxel_size, limits)) {
-  near_.assign(spec_.voxel_count(), 0);
-  for (Eigen::Index i = 0; i < evidence.points().rows(); ++i) {
-    const Eigen::Vector3i v = spec_.index_of(evidence.points().row(i).transpose());
-    std::uint32_t mask = 0;
-    normal_direction(evidence.normals().row(i).transpose(), &mask);
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz)
-          near_[linear(spec_, v + Eigen::Vector3i(dx, dy, dz))] |= mask;
-  }
+    : scene_(&scene) {
+  fitness_.set_scene(evidence, scene_map_spec(evidence, voxel_size, limits),
+                     FitnessMap::Coverage::whole_scene);
 }
 
 double SceneMap::fitness(const Points& points, const Points& normals) const {
-  // (voxel, direction) of every model point; voxels as 21-bit-per-axis keys, so that
-  // points outside the map count too (as unsupported).
-  seen_.clear();
-  for (Eigen::Index i = 0; i < points.rows(); ++i) {
-    const Eigen::Vector3i v = spec_.index_of(points.row(i).transpose());
-    seen_.emplace_back(voxel_key(v.array()), normal_direction(normals.row(i).transpose()));
-  }
-  std::sort(seen_.begin(), seen_.end());
-  std::size_t voxels = 0, supported = 0;
-  for (std::size_t i = 0; i < seen_.size();) {
-    const std::uint64_t key = seen_[i].first;
-    const Eigen::Vector3i v(int(key >> 42) - (1 << 20), int((key >> 21) & 0x1FFFFF) - (1 << 20),
-                            int(key & 0x1FFFFF) - (1 << 20));
-    const std::uint32_t mask = spec_.contains(v) ? near_[linear(spec_, v)] : 0u;
-    bool support = false;
-    for (; i < seen_.size() && seen_[i].first == key; ++i)
-      support |= (mask >> seen_[i].second) & 1u;
-    ++voxels;
-    supported += support;
-  }
-  return voxels ? double(supported) / double(voxels) : 0.0;
+  return fitness_.fitness(points, normals);
 }
 
 std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) const {

@@ -7,6 +7,7 @@
 #include <spectral_vs/translation/phase_correlation.hpp>
 
 #include "alignment/algorithm1.hpp"
+#include "alignment/fitness_map.hpp"
 
 #include <Eigen/Geometry>
 #include <cstdint>
@@ -57,21 +58,22 @@ Points points_in_reach(const Points& scene, const Eigen::AlignedBox3d& model_box
 /// The box of a non-empty set of points.
 Eigen::AlignedBox3d points_box(const Points& points);
 
-/// For each voxel of the scene's box, the directions of the normals of the scene points
-/// within one voxel of it (a mask over 26 directions), for the fitness of a pose; and
-/// the scene points near a place, for windows.
+/// The scene as align() queries it: the fitness of a pose (FitnessMap over the whole
+/// scene, recorded once) and the scene points near a place, for windows.
 class SceneMap {
  public:
   /// `scene` is searched and windowed; `evidence` (the whole scene, or the same cloud)
-  /// scores fitness. @throws std::invalid_argument if the map exceeds `limits`.
+  /// scores fitness; both must outlive the map. @throws std::invalid_argument if the map
+  /// exceeds `limits`.
   SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
            const GridLimits& limits);
 
   const PointCloud& cloud() const { return *scene_; }
 
-  /// Fraction of the occupied voxels of `points` that lie within one voxel of a scene
-  /// point whose normal is within about 50 degrees of theirs, in [0, 1]. The normals
-  /// keep a model lying flat on a table, or turned inside out, from scoring as a fit.
+  /// FitnessMap::fitness against `evidence`: fraction of the occupied voxels of `points`
+  /// that lie within one voxel of a scene point whose normal is within about 50 degrees
+  /// of theirs, in [0, 1]. The normals keep a model lying flat on a table, or turned
+  /// inside out, from scoring as a fit.
   double fitness(const Points& points, const Points& normals) const;
 
   /// Indices of the scene points inside the axis-aligned box.
@@ -79,9 +81,7 @@ class SceneMap {
 
  private:
   const PointCloud* scene_;
-  GridSpec spec_;
-  std::vector<std::uint32_t> near_;  // per voxel: directions of nearby scene normals
-  mutable std::vector<std::pair<std::uint64_t, int>> seen_;  // scratch: (voxel key, direction)
+  mutable FitnessMap fitness_;  // its buffers are scratch: fitness() is const
 };
 
 /// A cubic window of the scene around the model, on a grid only as large as the window:

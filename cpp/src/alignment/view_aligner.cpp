@@ -38,8 +38,6 @@ constexpr Eigen::Index kSupportPoints = 4000;
 // Iterations of the EGI refinement of each rotation of the SO(3) search, before it is
 // placed: the grid's nodes are pi / B apart (11 degrees at B = 16).
 constexpr int kRotationRefineIterations = 20;
-// The ICP's second stage pairs within this share of a voxel (as align()'s).
-constexpr double kIcpFineDistance = 0.4;
 // The ICP's pose is kept unless it loses this much of the coarse score (as align()'s
 // fitness rule): at a voxel's tolerance a precise pose scores about as a rough one, and
 // the refined poses are compared precise.
@@ -343,16 +341,10 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
 void refine_with_icp(const Views& views, ViewAlignResult& result) {
   detail::IcpSettings icp;
   icp.viewpoint = views.params.sensor_origin;
-  Transform T = result.T_current_reference;
-  int iterations = 0;
-  for (const double share : {1.0, kIcpFineDistance}) {
-    icp.max_distance = share * views.scale.voxel_size;
-    const detail::IcpOutcome outcome =
-        detail::refine_point_to_plane(views.reference, views.fine_scene, T, icp);
-    if (outcome.iterations == 0) break;
-    T = outcome.T_scene_model;
-    iterations += outcome.iterations;
-  }
+  const detail::IcpOutcome outcome = detail::refine_in_two_stages(
+      views.reference, views.fine_scene, result.T_current_reference, views.scale.voxel_size, icp);
+  const Transform& T = outcome.T_scene_model;
+  const int iterations = outcome.iterations;
   if (iterations == 0) return;
   const ViewSupport icp_support = views.support.of(T, kCoarseTolerance);
   if (icp_support.score >= result.support.score - kIcpScoreLoss) {

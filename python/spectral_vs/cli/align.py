@@ -75,6 +75,15 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "scene", type=Path, metavar="SCENE", help="cloud to find it in (.pcd or .ply)"
     )
     settings = align.add_argument_group("alignment settings")
+    _add_search_settings(settings)
+    _add_start_settings(settings)
+    _add_check_arguments(align.add_argument_group("checking against a known answer"))
+    _add_output_arguments(align.add_argument_group("output"))
+    align.set_defaults(run=run_align)
+
+
+def _add_search_settings(settings: Any) -> None:
+    """The grid, the bandwidth and the search: --voxel-size to --refinement-iterations."""
     settings.add_argument(
         "--voxel-size",
         type=_positive_float,
@@ -116,6 +125,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         help="with global search: iterations of Algorithm 1 per refined hypothesis "
         f"(default: {svs.AlignParams().refinement_iterations})",
     )
+
+
+def _add_start_settings(settings: Any) -> None:
+    """The threads, the start and the normals' viewpoint."""
     settings.add_argument(
         "--threads",
         type=_positive_int,
@@ -137,7 +150,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         metavar=("X", "Y", "Z"),
         help="sensor position that estimated normals face, metres (default: 0 0 0)",
     )
-    check = align.add_argument_group("checking against a known answer")
+
+
+def _add_check_arguments(check: Any) -> None:
+    """The ground truth and the error limits."""
     check.add_argument(
         "--ground-truth",
         type=Path,
@@ -159,7 +175,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         metavar="MM",
         help=f"exit 1 above this translation error (default: {MAX_TRANSLATION_ERROR:g})",
     )
-    output = align.add_argument_group("output")
+
+
+def _add_output_arguments(output: Any) -> None:
+    """What is printed and written."""
     output.add_argument(
         "--json",
         action="store_true",
@@ -185,20 +204,12 @@ def add_parser(commands: Any, formatter: Any) -> None:
         help="write MODEL moved by T_scene_model (.pcd or .ply)",
     )
     output.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    align.set_defaults(run=run_align)
 
 
 def run_align(args: argparse.Namespace) -> int:
     """Align MODEL onto SCENE and report the pose (and its error against a ground truth)."""
     progress = Progress(not (args.quiet or args.json))
-    for path, argument in ((args.model, "MODEL"), (args.scene, "SCENE")):
-        if not path.exists():  # before any progress line, so the error is the only output
-            raise InputError(f"{argument}: no such file: {path}")
-        if path.is_dir():
-            raise InputError(f"{argument}: {path} is a folder, not a .pcd or .ply file")
-    _check_output(args.plot, "--plot", (".png", ".pdf", ".svg"))
-    _check_output(args.render, "--render", (".png", ".pdf", ".svg"))
-    _check_output(args.save_aligned, "--save-aligned", CLOUD_SUFFIXES)
+    _check_paths(args)
     plotting: Any = (
         _plotting("--plot" if args.plot else "--render") if (args.plot or args.render) else None
     )
@@ -215,19 +226,7 @@ def run_align(args: argparse.Namespace) -> int:
         notes.append(f"{len(scene)} points")
     timings["load"] = time.perf_counter() - start
 
-    settings = svs.AlignParams()
-    settings.voxel_size = args.voxel_size
-    settings.bandwidth = args.bandwidth
-    settings.global_search = not args.paper
-    settings.threads = args.threads
-    if args.hypotheses is not None:
-        settings.hypotheses = args.hypotheses
-    if args.max_iterations is not None:
-        settings.max_iterations = args.max_iterations
-    if args.refinement_iterations is not None:
-        settings.refinement_iterations = args.refinement_iterations
-    if initial is not None:
-        settings.initial_guess = initial
+    settings = _settings(args, initial)
 
     start = time.perf_counter()
     with progress.stage("downsampling and estimating normals") as notes:
@@ -259,6 +258,60 @@ def run_align(args: argparse.Namespace) -> int:
         with progress.stage(f"writing {args.save_aligned}"):
             args.save_aligned.parent.mkdir(parents=True, exist_ok=True)
             svs.save_cloud(args.save_aligned, model.transformed(T))
+    clouds = (model_ready, scene_ready)
+    _write_figures(args, progress, plotting, clouds, result, settings, truth, center)
+
+    if args.json:
+        report = _report(result, settings, timings, (len(model), len(scene)), errors)
+        report["passed"] = passed
+        print(json.dumps(report, indent=2))
+        return 0 if passed else 1
+    _print_result(args, result, timings, errors)
+    return 0 if passed else 1
+
+
+def _check_paths(args: argparse.Namespace) -> None:
+    """The input files exist and the outputs have a known suffix."""
+    for path, argument in ((args.model, "MODEL"), (args.scene, "SCENE")):
+        if not path.exists():  # before any progress line, so the error is the only output
+            raise InputError(f"{argument}: no such file: {path}")
+        if path.is_dir():
+            raise InputError(f"{argument}: {path} is a folder, not a .pcd or .ply file")
+    _check_output(args.plot, "--plot", (".png", ".pdf", ".svg"))
+    _check_output(args.render, "--render", (".png", ".pdf", ".svg"))
+    _check_output(args.save_aligned, "--save-aligned", CLOUD_SUFFIXES)
+
+
+def _settings(args: argparse.Namespace, initial: np.ndarray | None) -> svs.AlignParams:
+    """The AlignParams of the command line."""
+    settings = svs.AlignParams()
+    settings.voxel_size = args.voxel_size
+    settings.bandwidth = args.bandwidth
+    settings.global_search = not args.paper
+    settings.threads = args.threads
+    if args.hypotheses is not None:
+        settings.hypotheses = args.hypotheses
+    if args.max_iterations is not None:
+        settings.max_iterations = args.max_iterations
+    if args.refinement_iterations is not None:
+        settings.refinement_iterations = args.refinement_iterations
+    if initial is not None:
+        settings.initial_guess = initial
+    return settings
+
+
+def _write_figures(
+    args: argparse.Namespace,
+    progress: Progress,
+    plotting: Any,
+    clouds: tuple[svs.PointCloud, svs.PointCloud],
+    result: svs.AlignResult,
+    settings: svs.AlignParams,
+    truth: np.ndarray | None,
+    center: np.ndarray,
+) -> None:
+    """--plot and --render; ``clouds``: the model and the scene as aligned, ``center``:
+    the model's centroid, where the translation error is measured."""
     if args.plot:
         with progress.stage(f"plotting {args.plot}"):
             _write(
@@ -277,36 +330,51 @@ def run_align(args: argparse.Namespace) -> int:
             _write(
                 args.render,
                 plotting.render_alignment,
-                model_ready,
-                scene_ready,
+                clouds[0],
+                clouds[1],
                 result,
                 initial_T=np.asarray(settings.initial_guess),
                 title=f"{args.model.name} onto {args.scene.name}",
             )
 
-    if args.json:
-        report: dict[str, Any] = {
-            "T_scene_model": T.tolist(),
-            "converged": bool(result.converged),
-            "stop_reason": result.stop_reason,
-            "iterations": int(result.iterations),
-            "fitness": float(result.fitness),
-            "correlation": float(result.correlation),
-            "translation_peak": float(result.translation_peak),
-            "hypothesis": int(result.hypothesis),
-            "time_s": timings["align"],
-            "timings_s": timings,
-            "voxel_size_m": settings.voxel_size,
-            "model_points": len(model),
-            "scene_points": len(scene),
-        }
-        if errors is not None:
-            report["rotation_error_deg"] = errors[0]
-            report["translation_error_mm"] = errors[1]
-        report["passed"] = passed
-        print(json.dumps(report, indent=2))
-        return 0 if passed else 1
 
+def _report(
+    result: svs.AlignResult,
+    settings: svs.AlignParams,
+    timings: dict[str, float],
+    points: tuple[int, int],
+    errors: tuple[float, float] | None,
+) -> dict[str, Any]:
+    """The --json report, without "passed"; ``points``: of the model and the scene read."""
+    report: dict[str, Any] = {
+        "T_scene_model": np.asarray(result.T_scene_model).tolist(),
+        "converged": bool(result.converged),
+        "stop_reason": result.stop_reason,
+        "iterations": int(result.iterations),
+        "fitness": float(result.fitness),
+        "correlation": float(result.correlation),
+        "translation_peak": float(result.translation_peak),
+        "hypothesis": int(result.hypothesis),
+        "time_s": timings["align"],
+        "timings_s": timings,
+        "voxel_size_m": settings.voxel_size,
+        "model_points": points[0],
+        "scene_points": points[1],
+    }
+    if errors is not None:
+        report["rotation_error_deg"] = errors[0]
+        report["translation_error_mm"] = errors[1]
+    return report
+
+
+def _print_result(
+    args: argparse.Namespace,
+    result: svs.AlignResult,
+    timings: dict[str, float],
+    errors: tuple[float, float] | None,
+) -> None:
+    """The pose, the state and the errors, as text."""
+    T = np.asarray(result.T_scene_model)
     with np.printoptions(precision=6, suppress=True):
         print("T_scene_model (moves MODEL coordinates into the SCENE frame, metres):")
         print(T)
@@ -329,4 +397,3 @@ def run_align(args: argparse.Namespace) -> int:
             f"{errors[1]:.1f} mm at the model centroid ({verdict}; limits "
             f"{args.max_rotation_error:g} deg, {args.max_translation_error:g} mm)"
         )
-    return 0 if passed else 1

@@ -126,39 +126,7 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
         plotting = None
         print(f"no figures: {error.__cause__}")
     voxel = args.voxel_size
-    have_scans = (args.data / MILK_MODEL).is_file() and (args.data / MILK_SCENE).is_file()
-    if have_scans and not args.synthetic:
-        with progress.stage("loading the Kinect scans") as notes:
-            carton = read_cloud(args.data / MILK_MODEL, "--data")
-            full_scene = read_cloud(args.data / MILK_SCENE, "--data")
-            notes.append(f"{len(carton)} and {len(full_scene)} points")
-        with progress.stage("splitting into disjoint samples"):
-            try:
-                model_points, scene_points = milk_split(carton, full_scene)
-            except ValueError as error:
-                raise InputError(f"--data: {error}") from error
-        print(f"scene: {MILK_SCENE} (Kinect, milk carton among clutter), {len(full_scene)} points")
-        print(
-            f"model: {MILK_MODEL}, cut out of that scan; disjoint samples: the model keeps "
-            f"{len(model_points)} of its {len(carton)} points, the scene {len(scene_points)} "
-            "points, 0 shared"
-        )
-        with progress.stage("estimating normals") as notes:
-            # A model is stored with its normals: estimate them before the model is moved.
-            model = prepare(svs.PointCloud(model_points), "model", voxel, True, (0.0, 0.0, 0.0))
-            scene = prepare(svs.PointCloud(scene_points), "scene", voxel, True, (0.0, 0.0, 0.0))
-            notes.append(f"{len(model)} and {len(scene)} points after downsampling")
-        name = "milk carton in the Kinect scene"
-    else:
-        if not args.synthetic:
-            print(f"no {MILK_MODEL} and {MILK_SCENE} in {args.data}: using a generated scene")
-        with progress.stage("generating a table-top scene"):
-            model, scene = synthetic_scene(args.seed)
-        print(
-            f"scene: generated table top with three boxes, {len(scene)} points, 1 mm noise; "
-            f"model: the box with a ball, sampled independently, {len(model)} points"
-        )
-        name = "box with ball in a generated scene"
+    model, scene, name = _demo_clouds(args, progress, voxel)
 
     # The model leaves its place in the scene: a rotation about its centroid and a shift.
     center = np.asarray(model.centroid())
@@ -218,6 +186,47 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
         _write(alignment, plotting.render_alignment, model, scene, result, title=title)
     print(f"wrote {convergence} and {alignment}")
     return status
+
+
+def _demo_clouds(
+    args: argparse.Namespace, progress: Progress, voxel: float
+) -> tuple[svs.PointCloud, svs.PointCloud, str]:
+    """The demo's model and scene, with normals, and the case's name: disjoint samples of
+    the milk carton's Kinect scan when the data folder has it, else a generated scene."""
+    have_scans = (args.data / MILK_MODEL).is_file() and (args.data / MILK_SCENE).is_file()
+    if have_scans and not args.synthetic:
+        with progress.stage("loading the Kinect scans") as notes:
+            carton = read_cloud(args.data / MILK_MODEL, "--data")
+            full_scene = read_cloud(args.data / MILK_SCENE, "--data")
+            notes.append(f"{len(carton)} and {len(full_scene)} points")
+        with progress.stage("splitting into disjoint samples"):
+            try:
+                model_points, scene_points = milk_split(carton, full_scene)
+            except ValueError as error:
+                raise InputError(f"--data: {error}") from error
+        print(f"scene: {MILK_SCENE} (Kinect, milk carton among clutter), {len(full_scene)} points")
+        print(
+            f"model: {MILK_MODEL}, cut out of that scan; disjoint samples: the model keeps "
+            f"{len(model_points)} of its {len(carton)} points, the scene {len(scene_points)} "
+            "points, 0 shared"
+        )
+        with progress.stage("estimating normals") as notes:
+            # A model is stored with its normals: estimate them before the model is moved.
+            model = prepare(svs.PointCloud(model_points), "model", voxel, True, (0.0, 0.0, 0.0))
+            scene = prepare(svs.PointCloud(scene_points), "scene", voxel, True, (0.0, 0.0, 0.0))
+            notes.append(f"{len(model)} and {len(scene)} points after downsampling")
+        name = "milk carton in the Kinect scene"
+    else:
+        if not args.synthetic:
+            print(f"no {MILK_MODEL} and {MILK_SCENE} in {args.data}: using a generated scene")
+        with progress.stage("generating a table-top scene"):
+            model, scene = synthetic_scene(args.seed)
+        print(
+            f"scene: generated table top with three boxes, {len(scene)} points, 1 mm noise; "
+            f"model: the box with a ball, sampled independently, {len(model)} points"
+        )
+        name = "box with ball in a generated scene"
+    return model, scene, name
 
 
 def run_translation_demo(args: argparse.Namespace) -> int:

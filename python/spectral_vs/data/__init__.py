@@ -1,7 +1,8 @@
 """Data shared by the command line, the tests and the benchmarks.
 
 * :mod:`spectral_vs.data.view_pairs`: pairs of views of one scene, cut out of the real
-  organized scans or rendered in the simulation, with their true relative pose.
+  organized scans or rendered in the simulation, with their true relative pose
+  (:mod:`spectral_vs.data.scan_windows`: the windows they are cut out of).
 * :mod:`spectral_vs.data.scenes`: seeded synthetic table-top scenes with exact normals,
   and the milk carton's scan split into a model and a scene that share no point.
 """

@@ -3,6 +3,7 @@ model and a scene that share no point: the data of ``spectral-vs demo`` and of t
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,7 +44,25 @@ def milk_split(model: PointCloud, scene: PointCloud) -> tuple[np.ndarray, np.nda
     return model_part, scene_part
 
 
-def _box_surface(
+@dataclass(frozen=True)
+class BoxWithBall:
+    """The synthetic object: a box and a ball, in metres.
+
+    The default is the demo's object: a 20 x 12 x 8 cm box with a 7 cm ball on its top,
+    the origin on the bottom face's centre.
+    """
+
+    half: tuple[float, float, float] = (0.10, 0.06, 0.04)  #: the box's half-sizes
+    ball_centre: tuple[float, float, float] = (0.05, 0.0, 0.04)  #: from the box's centre
+    ball_radius: float = 0.035
+    #: where the box's centre is placed (every point is shifted by it last)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.04)
+    bottom: bool = False  #: the box's bottom face is sampled (it stands on nothing)
+    #: the ball's points inside the box and the box's inside the ball are dropped
+    hidden_dropped: bool = True
+
+
+def _box_by_density(
     rng: np.random.Generator, half: np.ndarray, density: float, bottom: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """Points and outward normals on a box's faces, ``density`` points per square metre."""
@@ -63,20 +82,60 @@ def _box_surface(
     return np.vstack(points), np.vstack(normals)
 
 
-def box_with_ball(rng: np.random.Generator, density: float) -> tuple[np.ndarray, np.ndarray]:
-    """A 20 x 12 x 8 cm box with a 7 cm ball on its top, origin on the bottom face's centre."""
-    half = np.array([0.10, 0.06, 0.04])
-    points, normals = _box_surface(rng, half, density)
-    count = int(density * 4 * np.pi * 0.035**2)
+def _box_by_count(
+    rng: np.random.Generator, half: np.ndarray, samples: int, bottom: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """``samples`` points and outward normals on a box's faces, each face drawn in
+    proportion to its area."""
+    faces = [(axis, sign) for axis in range(3) for sign in (1.0, -1.0)]
+    faces = [(axis, sign) for axis, sign in faces if bottom or (axis, sign) != (2, -1.0)]
+    areas = np.array([np.prod(np.delete(half, axis)) for axis, _ in faces])
+    face = rng.choice(len(faces), size=samples, p=areas / areas.sum())
+    axis = np.array([faces[f][0] for f in face], dtype=int)
+    sign = np.array([faces[f][1] for f in face])
+    rows = np.arange(samples)
+    points = rng.uniform(-1, 1, size=(samples, 3)) * half
+    points[rows, axis] = sign * half[axis]
+    normals = np.zeros((samples, 3))
+    normals[rows, axis] = sign
+    return points, normals
+
+
+def box_with_ball(
+    rng: np.random.Generator,
+    density: float | None = None,
+    *,
+    samples: int | None = None,
+    shape: BoxWithBall = BoxWithBall(),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points and exact outward normals of a box with a ball (``shape``), seeded by ``rng``.
+
+    Either ``density`` points per square metre on every surface (the demo's scenes), or
+    ``samples`` points before the hidden ones are dropped: half on the ball, the rest on
+    the box's faces in proportion to their areas (a ball much denser than the box, whose
+    normals then weigh as much as the box's). The box first, then the ball.
+    """
+    if (density is None) == (samples is None):
+        raise ValueError("box_with_ball: give either density or samples")
+    half = np.asarray(shape.half, dtype=float)
+    centre = np.asarray(shape.ball_centre, dtype=float)
+    if density is not None:
+        points, normals = _box_by_density(rng, half, density, shape.bottom)
+        count = int(density * 4 * np.pi * shape.ball_radius**2)
+    else:
+        assert samples is not None
+        points, normals = _box_by_count(rng, half, samples - samples // 2, shape.bottom)
+        count = samples // 2
     ball = rng.normal(size=(count, 3))
     ball /= np.linalg.norm(ball, axis=1, keepdims=True)
-    ball_points = np.array([0.05, 0.0, 0.04]) + 0.035 * ball
-    keep = ball_points[:, 2] > 0.04
-    # Drop the box top under the ball, which the ball hides.
-    top = (points[:, 2] > 0.0399) & (np.linalg.norm(points[:, :2] - [0.05, 0.0], axis=1) < 0.035)
-    points = np.vstack([points[~top], ball_points[keep]])
-    normals = np.vstack([normals[~top], ball[keep]])
-    return points + np.array([0.0, 0.0, 0.04]), normals
+    ball_points = centre + shape.ball_radius * ball
+    if shape.hidden_dropped:
+        shown = ~np.all(np.abs(ball_points) <= half, axis=1)
+        under = np.linalg.norm(points - centre, axis=1) < shape.ball_radius
+        points, normals = points[~under], normals[~under]
+        ball_points, ball = ball_points[shown], ball[shown]
+    points = np.vstack([points, ball_points])
+    return points + np.asarray(shape.offset), np.vstack([normals, ball])
 
 
 def _placed(points: np.ndarray, normals: np.ndarray, yaw_deg: float, position: Any):
@@ -111,7 +170,7 @@ def synthetic_scene(seed: int = 0) -> tuple[PointCloud, PointCloud]:
     plane = plane[~hidden]
     parts.append((plane, np.tile([0.0, 0.0, 1.0], (len(plane), 1))))
     for half, yaw, position in obstacles:
-        parts.append(_placed(*_box_surface(rng, half, density), yaw, position))
+        parts.append(_placed(*_box_by_density(rng, half, density), yaw, position))
     scene_points = np.vstack([p for p, _ in parts])
     scene_points = scene_points + rng.normal(0, 0.001, scene_points.shape)
     scene = PointCloud(scene_points, np.vstack([n for _, n in parts]))

@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from spectral_vs._core import PointCloud, estimate_normals, load_organized, rotation_angle
+from spectral_vs.data.scan_windows import place_windows, window_view
 
 if TYPE_CHECKING:
     from spectral_vs.sim import SimParams
@@ -188,44 +189,6 @@ def _organized(scan: str | os.PathLike[str] | npt.ArrayLike) -> tuple[np.ndarray
     return points, name
 
 
-def _window_offsets(
-    rng: np.random.Generator, size: tuple[int, int], window: tuple[int, int], overlap: float
-) -> tuple[int, int]:
-    """Signed (du, dv) of the current window from the reference window, pixels, such that
-    (w - |du|)(h - |dv|) is as near ``overlap`` w h as integers allow and both windows fit
-    in the image. The split of the overlap between columns and rows is drawn (log-uniform
-    over the feasible range)."""
-    (W, H), (w, h) = size, window
-    # 1D overlap fractions fu, fv with fu fv = overlap, fu >= 1 - (W - w) / w, likewise fv.
-    fu_min, fv_min = max(1.0 - (W - w) / w, 1.0 / w), max(1.0 - (H - h) / h, 1.0 / h)
-    low = max(math.log(fu_min), math.log(overlap))
-    high = min(0.0, math.log(overlap) - math.log(fv_min))
-    if low > high + 1e-12:
-        least = fu_min * fv_min
-        raise ValueError(
-            f"overlap must be >= {least:.3f} for this window_share (the windows would not "
-            f"fit in the {W}x{H} image), got {overlap}"
-        )
-    fu = math.exp(rng.uniform(low, high)) if high > low else math.exp(low)
-    du = min(round(w * (1.0 - fu)), W - w)
-    # The rows that bring the area nearest the requested overlap, given the columns.
-    dv = min(max(round(h - overlap * w * h / (w - du)), 0), H - h)
-    signs = rng.choice([-1, 1], size=2)
-    return int(signs[0] * du), int(signs[1] * dv)
-
-
-def _view(
-    image: np.ndarray, corner: tuple[int, int], window: tuple[int, int], parity: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Finite points and their (u, v) pixels in a window, of the pixels with
-    (u + v) % 2 == parity."""
-    (u0, v0), (w, h) = corner, window
-    v, u = np.mgrid[v0 : v0 + h, u0 : u0 + w]
-    points = image[v, u]
-    keep = ((u + v) % 2 == parity) & np.all(np.isfinite(points), axis=2)
-    return points[keep], np.stack([u[keep], v[keep]], axis=1)
-
-
 def _with_normals(
     points: np.ndarray, pixels: np.ndarray, viewpoint: np.ndarray, neighbors: int
 ) -> tuple[PointCloud, np.ndarray]:
@@ -236,6 +199,55 @@ def _with_normals(
         index = {tuple(p): i for i, p in enumerate(points)}
         pixels = pixels[[index[tuple(p)] for p in cloud.points]]
     return cloud, pixels
+
+
+def _check_view_pair_arguments(
+    window_share: float,
+    overlap: float,
+    downscale: int,
+    rotation_range_deg: tuple[float, float],
+    max_translation: float,
+    normal_neighbors: int,
+) -> None:
+    """make_view_pair's ranges; a ValueError naming the first argument outside its range."""
+    if not 0.0 < window_share <= 1.0:
+        raise ValueError(f"window_share must be in (0, 1], got {window_share}")
+    if not 0.0 < overlap <= 1.0:
+        raise ValueError(f"overlap must be in (0, 1], got {overlap}")
+    if downscale < 1:
+        raise ValueError(f"downscale must be >= 1, got {downscale}")
+    low, high = rotation_range_deg
+    if not 0.0 <= low <= high <= 180.0:
+        raise ValueError(
+            f"rotation_range_deg must be (low, high) with 0 <= low <= high <= 180, "
+            f"got {rotation_range_deg}"
+        )
+    if not 0.0 <= max_translation < math.inf:
+        raise ValueError(f"max_translation must be finite and >= 0, got {max_translation}")
+    if normal_neighbors < 3:
+        raise ValueError(f"normal_neighbors must be >= 3, got {normal_neighbors}")
+
+
+def _two_views(
+    image: np.ndarray,
+    corners: tuple[tuple[int, int], tuple[int, int]],
+    window: tuple[int, int],
+    T: np.ndarray,
+    normal_neighbors: int,
+) -> tuple[tuple[PointCloud, np.ndarray], tuple[PointCloud, np.ndarray]]:
+    """The reference (even pixels of its window) and the current (odd pixels, moved by T),
+    each with normals facing its sensor and its pixels."""
+    ref_points, ref_pixels = window_view(image, corners[0], window, parity=0)
+    cur_points, cur_pixels = window_view(image, corners[1], window, parity=1)
+    for label, view in (("reference", ref_points), ("current", cur_points)):
+        if len(view) < MIN_POINTS:
+            raise ValueError(
+                f"scan gives the {label} view {len(view)} finite points, fewer than "
+                f"{MIN_POINTS}: too few returns in its window"
+            )
+    cur_points = cur_points @ T[:3, :3].T + T[:3, 3]
+    reference = _with_normals(ref_points, ref_pixels, np.zeros(3), normal_neighbors)
+    return reference, _with_normals(cur_points, cur_pixels, T[:3, 3].copy(), normal_neighbors)
 
 
 def make_view_pair(
@@ -293,46 +305,21 @@ def make_view_pair(
         If ``scan`` is not organized, an argument is outside its range, the overlap does
         not fit the windows, or a view has fewer than :data:`MIN_POINTS` points.
     """
-    if not 0.0 < window_share <= 1.0:
-        raise ValueError(f"window_share must be in (0, 1], got {window_share}")
-    if not 0.0 < overlap <= 1.0:
-        raise ValueError(f"overlap must be in (0, 1], got {overlap}")
-    if downscale < 1:
-        raise ValueError(f"downscale must be >= 1, got {downscale}")
-    low, high = rotation_range_deg
-    if not 0.0 <= low <= high <= 180.0:
-        raise ValueError(
-            f"rotation_range_deg must be (low, high) with 0 <= low <= high <= 180, "
-            f"got {rotation_range_deg}"
-        )
-    if not 0.0 <= max_translation < math.inf:
-        raise ValueError(f"max_translation must be finite and >= 0, got {max_translation}")
-    if normal_neighbors < 3:
-        raise ValueError(f"normal_neighbors must be >= 3, got {normal_neighbors}")
+    _check_view_pair_arguments(
+        window_share, overlap, downscale, rotation_range_deg, max_translation, normal_neighbors
+    )
     points, name = _organized(scan)
     image = points[::downscale, ::downscale]
     H, W = image.shape[:2]
-    scale = math.sqrt(window_share)
-    window = (max(2, round(scale * W)), max(2, round(scale * H)))
     rng = np.random.default_rng(seed)
-    du, dv = _window_offsets(rng, (W, H), window, overlap)
-    u0 = int(rng.integers(max(0, -du), W - window[0] - max(0, du) + 1))
-    v0 = int(rng.integers(max(0, -dv), H - window[1] - max(0, dv) + 1))
-    corners = (u0, v0), (u0 + du, v0 + dv)
+    window, corners = place_windows(rng, (W, H), window_share, overlap)
+    du, dv = corners[1][0] - corners[0][0], corners[1][1] - corners[0][1]
     T = random_transform(rng, rotation_range_deg, max_translation)
 
-    ref_points, ref_pixels = _view(image, corners[0], window, parity=0)
-    cur_points, cur_pixels = _view(image, corners[1], window, parity=1)
-    for label, view in (("reference", ref_points), ("current", cur_points)):
-        if len(view) < MIN_POINTS:
-            raise ValueError(
-                f"scan gives the {label} view {len(view)} finite points, fewer than "
-                f"{MIN_POINTS}: too few returns in its window"
-            )
-    cur_points = cur_points @ T[:3, :3].T + T[:3, 3]
+    (reference, ref_pixels), (current, cur_pixels) = _two_views(
+        image, corners, window, T, normal_neighbors
+    )
     viewpoint = T[:3, 3].copy()
-    reference, ref_pixels = _with_normals(ref_points, ref_pixels, np.zeros(3), normal_neighbors)
-    current, cur_pixels = _with_normals(cur_points, cur_pixels, viewpoint, normal_neighbors)
     shared = (window[0] - abs(du)) * (window[1] - abs(dv)) / (window[0] * window[1])
     return ViewPair(
         name=name,
