@@ -478,8 +478,9 @@ def main() -> int:
     started = time.perf_counter()
     talk = not args.quiet
     results: dict[str, Any] = {
-        "command": "OMP_NUM_THREADS=1 python benchmarks/soak_benchmark.py "
-        + " ".join(a for a in sys.argv[1:]),
+        "command": " ".join(
+            ["OMP_NUM_THREADS=1 python benchmarks/soak_benchmark.py", *sys.argv[1:]]
+        ),
         "commit": report_lib.commit(),
         "core_sha256": report_lib.core_sha256(),
         "machine": report_lib.machine(),
