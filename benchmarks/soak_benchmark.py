@@ -21,7 +21,9 @@ same fixed pair, whose pose must not change at all.
 
 Reported, for each loop: the resident memory (``VmRSS`` of ``/proc/self/status``) at
 steps 100, 1000 and the last, its growth after the warm-up (from step 100 to the last),
-the median CPU time (``time.process_time``, one thread) of the servo step or the
+malloc's memory in use at the same steps (glibc's ``mallinfo2``: what the program holds,
+without the free memory the allocator keeps), the resident memory after ``malloc_trim``
+at the end, the median CPU time (``time.process_time``, one thread) of the servo step or the
 alignment per block of 1000, and the drift: the servo's true error at the goal
 (median and largest after the warm-up), the alignments' errors and the fixed pair's
 largest change. Results: ``benchmarks/results/soak.json`` and the table of
