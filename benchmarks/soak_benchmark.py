@@ -21,7 +21,9 @@ same fixed pair, whose pose must not change at all.
 
 Reported, for each loop: the resident memory (``VmRSS`` of ``/proc/self/status``) at
 steps 100, 1000 and the last, its growth after the warm-up (from step 100 to the last),
-the median CPU time (``time.process_time``, one thread) of the servo step or the
+malloc's memory in use at the same steps (glibc's ``mallinfo2``: what the program holds,
+without the free memory the allocator keeps), the resident memory after ``malloc_trim``
+at the end, the median CPU time (``time.process_time``, one thread) of the servo step or the
 alignment per block of 1000, and the drift: the servo's true error at the goal
 (median and largest after the warm-up), the alignments' errors and the fixed pair's
 largest change. Results: ``benchmarks/results/soak.json`` and the table of
@@ -39,6 +41,7 @@ Needs pybullet and the scans (``SPECTRAL_VS_DATA``, default ``../shared/data``).
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import math
 import os
@@ -79,6 +82,46 @@ def rss_mb() -> float:
     raise RuntimeError("no VmRSS in /proc/self/status")
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in (
+            "arena", "ordblks", "smblks", "hblks", "hblkhd",
+            "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost",
+        )
+    ]  # fmt: skip
+
+
+def _libc() -> ctypes.CDLL | None:
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallinfo2.restype = _MallInfo2
+        return libc
+    except (OSError, AttributeError):  # not glibc 2.33 or later
+        return None
+
+
+_LIBC = _libc()
+
+
+def in_use_mb() -> float:
+    """Memory that malloc has handed out and not been given back (glibc's ``mallinfo2``:
+    heap chunks in use plus mmapped ones), MB; NaN without glibc. The resident memory
+    also holds what the allocator keeps free for later: a growth of the resident memory
+    that this does not share is the allocator's, not the program's."""
+    if _LIBC is None:
+        return math.nan
+    info = _LIBC.mallinfo2()
+    return (info.uordblks + info.hblkhd) / 2**20
+
+
+def trimmed_rss_mb() -> float:
+    """Resident memory after ``malloc_trim(0)`` has given the allocator's free pages back, MB."""
+    if _LIBC is not None:
+        _LIBC.malloc_trim(0)
+    return rss_mb()
+
+
 def marks(count: int) -> list[int]:
     return [m for m in MARKS if m < count] + [count]
 
@@ -89,13 +132,42 @@ def block_medians(seconds: list[float]) -> list[float]:
     ]
 
 
-def memory_summary(memory: dict[int, float]) -> dict[str, Any]:
-    steps = sorted(memory)
-    warm = MARKS[0] if MARKS[0] in memory else steps[0]
-    return {
-        "rss_mb": {str(s): memory[s] for s in steps},
-        "growth_after_warmup_mb": memory[steps[-1]] - memory[warm],
+class _Memory:
+    """The resident memory and malloc's memory in use, sampled at the same steps."""
+
+    def __init__(self) -> None:
+        self.rss: dict[int, float] = {}
+        self.in_use: dict[int, float] = {}
+        self.trimmed: float | None = None  # at the end, after malloc_trim
+
+    def sample(self, step: int) -> float:
+        self.rss[step] = rss_mb()
+        self.in_use[step] = in_use_mb()
+        return self.rss[step]
+
+    def __contains__(self, step: int) -> bool:
+        return step in self.rss
+
+    def __getitem__(self, step: int) -> float:
+        return self.rss[step]
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        return iter(self.rss)
+
+
+def memory_summary(memory: _Memory) -> dict[str, Any]:
+    steps = sorted(memory.rss)
+    warm = MARKS[0] if MARKS[0] in memory.rss else steps[0]
+    summary = {
+        "rss_mb": {str(s): memory.rss[s] for s in steps},
+        "growth_after_warmup_mb": memory.rss[steps[-1]] - memory.rss[warm],
+        # What the program holds (malloc's chunks in use), beside what is resident.
+        "in_use_mb": {str(s): memory.in_use[s] for s in steps},
+        "in_use_growth_after_warmup_mb": memory.in_use[steps[-1]] - memory.in_use[warm],
     }
+    if memory.trimmed is not None:
+        summary["rss_after_trim_mb"] = memory.trimmed
+    return summary
 
 
 class _Series:
@@ -144,7 +216,7 @@ def soak_servo(
     params = servo_lib.ServoParams()
     velocity = svs.VelocityCommandParams(dt=0.1, max_joint_speed=1.0)
     errors_mm, errors_deg, seconds = _Series(steps), _Series(steps), _Series(steps)
-    memory: dict[int, float] = {}
+    memory = _Memory()
     counts = {"holds": 0, "converged": 0, "moving": 0, "relocalized": 0}
     drift = _Drift()
     stopped = None
@@ -185,16 +257,18 @@ def soak_servo(
             errors_deg.append(math.degrees(r_err))
             drift.add(step, T_world_camera)
             if step in mark_at or step % CHECKPOINT == 0:
-                memory[step] = rss_mb()
+                memory.sample(step)
                 if talk:
                     median_ms = 1000 * statistics.median(seconds.values()[-100:])
                     print(
-                        f"servo step {step}: {memory[step]:.1f} MB, error {t_err * 1000:.3f} mm "
+                        f"servo step {step}: {memory[step]:.1f} MB "
+                        f"({memory.in_use[step]:.1f} in use), error {t_err * 1000:.3f} mm "
                         f"{math.degrees(r_err):.4f} deg, step {median_ms:.1f} ms",
                         flush=True,
                     )
             if checkpoint is not None and step % CHECKPOINT == 0 and step < steps:
                 checkpoint(summary())
+        memory.trimmed = trimmed_rss_mb()  # with the simulation still loaded
     return summary()
 
 
@@ -203,7 +277,7 @@ def servo_summary(
     errors_deg: _Series,
     drift: _Drift,
     seconds: _Series,
-    memory: dict[int, float],
+    memory: _Memory,
     counts: dict[str, int],
     stopped: str | None,
 ) -> dict[str, Any]:
@@ -265,7 +339,7 @@ def soak_align(
     fixed_first = None
     fixed_change = 0.0
     errors_mm, errors_deg, seconds = _Series(count), _Series(count), _Series(count)
-    memory: dict[int, float] = {}
+    memory = _Memory()
     mark_at = set(marks(count))
     for i in range(1, count + 1):
         fixed = i % 100 == 0
@@ -284,15 +358,16 @@ def soak_align(
                 fixed_first = pose
             fixed_change = max(fixed_change, float(np.abs(pose - fixed_first).max()))
         if i in mark_at or i % CHECKPOINT == 0:
-            memory[i] = rss_mb()
+            memory.sample(i)
             if talk:
                 print(
-                    f"alignment {i}: {memory[i]:.1f} MB, "
+                    f"alignment {i}: {memory[i]:.1f} MB ({memory.in_use[i]:.1f} in use), "
                     f"{1000 * statistics.median(seconds.values()[-100:]):.1f} ms",
                     flush=True,
                 )
         if checkpoint is not None and i % CHECKPOINT == 0 and i < count:
             checkpoint(align_summary(errors_mm, errors_deg, seconds, memory, fixed_change))
+    memory.trimmed = trimmed_rss_mb()
     return align_summary(errors_mm, errors_deg, seconds, memory, fixed_change)
 
 
@@ -300,7 +375,7 @@ def align_summary(
     errors_mm: _Series,
     errors_deg: _Series,
     seconds: _Series,
-    memory: dict[int, float],
+    memory: _Memory,
     fixed_change: float,
 ) -> dict[str, Any]:
     mm, deg = errors_mm.values(), errors_deg.values()
@@ -327,6 +402,12 @@ def table(results: dict[str, Any]) -> str:
                 f"{name}, {loop[unit]} {unit}",
                 ", ".join(f"{rss[k]:.1f} MB at {k}" for k in shown),
                 f"{loop['growth_after_warmup_mb']:+.1f} MB",
+                f"{loop['in_use_growth_after_warmup_mb']:+.1f} MB"
+                + (
+                    f"; {loop['rss_after_trim_mb']:.1f} MB resident after malloc_trim"
+                    if "rss_after_trim_mb" in loop
+                    else ""
+                ),
                 ", ".join(
                     f"{v:.1f}"
                     for v in loop[
@@ -336,7 +417,14 @@ def table(results: dict[str, Any]) -> str:
             ]
         )
     head = report_lib.markdown(
-        ["loop", "resident memory", "growth after step 100", "median ms per 1000 steps"], rows
+        [
+            "loop",
+            "resident memory",
+            "growth after step 100",
+            "malloc's memory in use: growth after step 100",
+            "median ms per 1000 steps",
+        ],
+        rows,
     )
     drift = (
         f"Servo at the goal after step 100: the true camera error from the reference pose "
@@ -392,8 +480,9 @@ def main() -> int:
     started = time.perf_counter()
     talk = not args.quiet
     results: dict[str, Any] = {
-        "command": "OMP_NUM_THREADS=1 python benchmarks/soak_benchmark.py "
-        + " ".join(a for a in sys.argv[1:]),
+        "command": " ".join(
+            ["OMP_NUM_THREADS=1 python benchmarks/soak_benchmark.py", *sys.argv[1:]]
+        ),
         "commit": report_lib.commit(),
         "core_sha256": report_lib.core_sha256(),
         "machine": report_lib.machine(),
