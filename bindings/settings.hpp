@@ -5,9 +5,10 @@
 // def_readwrite and def_property), found on the class when called, in the order they were
 // bound: a field added to the binding is in the constructor and the repr with no other line.
 // A deprecated alias (listed in the class's `_deprecated_aliases`) is a keyword only.
-// A nested group of settings (`define_group`: `params.search`, itself such a struct) is a
-// read-only property whose fields are also the outer struct's, under the same names: the
-// outer struct's keywords, repr and equality are those of its flat fields.
+// A nested group of settings (`define_group`: `params.search`, itself such a struct, listed
+// in `_groups`) is a property whose fields are also the outer struct's, under the same
+// names: the outer struct's repr and equality are those of its flat fields, and its
+// keywords are those fields and the groups (a group given is copied in).
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -32,18 +33,30 @@ inline std::vector<std::string> alias_names(const py::handle& type) {
   return names;
 }
 
+/// The nested groups of the bound class `type` (its `_groups`, a tuple of names; none if
+/// it has none): settable, but not fields of their own (their fields are).
+inline std::vector<std::string> group_names(const py::handle& type) {
+  std::vector<std::string> names;
+  if (py::hasattr(type, "_groups")) {
+    for (const auto& name : type.attr("_groups")) names.push_back(py::str(name));
+  }
+  return names;
+}
+
 /// The settable properties of the bound class `type`, in the order they were bound; with
 /// `aliases` off, without its deprecated aliases (the repr and equality show and compare
 /// the fields they stand for, and reading an alias warns).
 inline std::vector<std::string> field_names(const py::handle& type, bool aliases = false) {
   const py::object property = py::module_::import("builtins").attr("property");
   const std::vector<std::string> deprecated = alias_names(type);
+  const std::vector<std::string> groups = group_names(type);
   std::vector<std::string> names;
   for (const auto& item : type.attr("__dict__").attr("items")()) {
     const auto pair = item.cast<py::tuple>();
     const std::string name = pair[0].cast<std::string>();
     if (name.rfind('_', 0) == 0 || !py::isinstance(pair[1], property)) continue;
     if (pair[1].attr("fset").is_none()) continue;  // read-only: not a setting
+    if (std::find(groups.begin(), groups.end(), name) != groups.end()) continue;
     const bool alias = std::find(deprecated.begin(), deprecated.end(), name) != deprecated.end();
     if (alias && !aliases) continue;
     names.push_back(name);
@@ -65,7 +78,8 @@ inline std::string value_repr(const py::handle& value) {
 /// that is no field (with the closest field names) or a value of the wrong type.
 inline void set_fields(const py::object& self, const py::kwargs& fields) {
   const std::string name = type_name(self);
-  const std::vector<std::string> names = field_names(py::type::of(self), true);
+  std::vector<std::string> names = field_names(py::type::of(self), true);
+  for (const auto& group : group_names(py::type::of(self))) names.push_back(group);
   for (const auto& [key_handle, value] : fields) {
     const std::string key = py::str(key_handle);
     bool known = false;
@@ -141,17 +155,23 @@ py::class_<Params, Options...>& define_settings(py::class_<Params, Options...>& 
   return cls;
 }
 
-/// Binds the nested settings struct `member` of `cls` as the read-only property `name`
-/// (a reference: `params.search.hypotheses = 8` changes params), and each field of the
-/// group's bound class (`define_settings`, bound before) as a field of `cls` of the same
-/// name that reads and writes it there (`params.hypotheses = 8`). The group's deprecated
-/// aliases become `cls`'s too.
+/// Binds the nested settings struct `member` of `cls` as the property `name` (read, a
+/// reference: `params.search.hypotheses = 8` changes params; assigned, or given as the
+/// keyword `Params(search=...)`, a copy of the group: as ServoParams takes its groups), and
+/// each field of the group's bound class (`define_settings`, bound before) as a field of
+/// `cls` of the same name that reads and writes it there (`params.hypotheses = 8`). The
+/// group's deprecated aliases become `cls`'s too.
 template <typename Params, typename Group, typename... Options>
 void define_group(py::class_<Params, Options...>& cls, const char* name, Group Params::*member,
                   const char* doc) {
-  cls.def_property_readonly(
+  cls.def_property(
       name, [member](Params& p) -> Group& { return p.*member; },
+      [member](Params& p, const Group& group) { p.*member = group; },
       py::return_value_policy::reference_internal, doc);
+  py::list groups;
+  for (const auto& group : settings_detail::group_names(cls)) groups.append(group);
+  groups.append(name);
+  cls.attr("_groups") = py::tuple(groups);
   const py::handle group = py::type::of<Group>();
   const std::string group_name = name;
   for (const std::string& field : settings_detail::field_names(group, true)) {

@@ -501,6 +501,7 @@ class AlignParams:
     def __init__(
         self,
         *,
+        scene: SceneParams = ...,
         voxel_size: float = ...,
         bandwidth: int = ...,
         occupancy: str = ...,
@@ -509,6 +510,7 @@ class AlignParams:
         scene_view: str = ...,
         scene_viewpoint: npt.ArrayLike | None = ...,
         suppress_support_plane: bool = ...,
+        local: LocalParams = ...,
         translation_gain: float = ...,
         rotation_gain: float = ...,
         rotation_step: str = ...,
@@ -517,6 +519,7 @@ class AlignParams:
         max_iterations: int = ...,
         subvoxel: bool = ...,
         max_translation: float = ...,
+        search: GlobalSearchParams = ...,
         global_search: bool = ...,
         hypotheses: int = ...,
         refinements: int = ...,
@@ -524,9 +527,11 @@ class AlignParams:
         window_margin: float = ...,
         guess_angle_deg: float = ...,
         guess_distance: float = ...,
+        refinement: RefinementParams = ...,
         refinement_iterations: int = ...,
         polish: bool = ...,
         icp_refinement: bool = ...,
+        verification: VerificationParams = ...,
         verify: bool = ...,
         max_alternatives: int = ...,
         initial_guess: npt.ArrayLike = ...,
@@ -540,14 +545,24 @@ class AlignParams:
     def __deepcopy__(self, memo: dict[Any, Any]) -> AlignParams: ...
     @property
     def scene(self) -> SceneParams: ...
+    @scene.setter
+    def scene(self, value: SceneParams) -> None: ...
     @property
     def local(self) -> LocalParams: ...
+    @local.setter
+    def local(self, value: LocalParams) -> None: ...
     @property
     def search(self) -> GlobalSearchParams: ...
+    @search.setter
+    def search(self, value: GlobalSearchParams) -> None: ...
     @property
     def refinement(self) -> RefinementParams: ...
+    @refinement.setter
+    def refinement(self, value: RefinementParams) -> None: ...
     @property
     def verification(self) -> VerificationParams: ...
+    @verification.setter
+    def verification(self, value: VerificationParams) -> None: ...
     # The groups' fields, read and written in their group.
     voxel_size: float  # metres, 0: derived from the model (alignment_voxel_size)
     bandwidth: int

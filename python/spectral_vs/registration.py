@@ -84,7 +84,7 @@ def with_overrides(params: Any, kind: type, overrides: dict[str, Any], what: str
             raise TypeError(f"unknown {what} {name!r}: no {kind.__name__} field of that name{hint}")
         try:
             setattr(settings, name, value)
-        except (TypeError, AttributeError) as error:  # AttributeError: a group (read-only)
+        except (TypeError, AttributeError) as error:  # AttributeError: a read-only property
             raise TypeError(f"{what} {name!r}: {error}") from error
     return settings
 

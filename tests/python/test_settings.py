@@ -17,8 +17,9 @@ BOUND = [svs.AlignParams, svs.ViewAlignParams, svs.DampingParams, svs.VelocityCo
 
 def fields_of(cls: type) -> list[str]:
     """The settable properties of a bound class, in the order they were bound, without its
-    deprecated aliases (keywords that stand for other fields)."""
-    aliases = getattr(cls, "_deprecated_aliases", ())
+    deprecated aliases (keywords that stand for other fields) and its groups (whose fields
+    are its own too)."""
+    aliases = getattr(cls, "_deprecated_aliases", ()) + getattr(cls, "_groups", ())
     return [
         name
         for name, value in vars(cls).items()
@@ -194,11 +195,18 @@ def test_a_group_is_a_reference_into_the_params_and_the_flat_field_is_the_same_v
     assert params.hypotheses == 12  # a copy of a group is its own
 
 
-def test_a_group_is_no_keyword_and_cannot_be_replaced():
-    with pytest.raises(TypeError, match="unexpected keyword argument 'search'"):
-        svs.AlignParams(search=svs.GlobalSearchParams())
-    with pytest.raises(AttributeError):
-        svs.AlignParams().search = svs.GlobalSearchParams()  # type: ignore[misc]
+def test_a_group_is_a_keyword_and_can_be_assigned_as_a_copy():
+    search = svs.GlobalSearchParams(hypotheses=8, refinements=2)
+    params = svs.AlignParams(search=search, voxel_size=0.005)
+    assert params.hypotheses == 8 and params.refinements == 2 and params.voxel_size == 0.005
+    search.hypotheses = 4
+    assert params.hypotheses == 8  # the group given was copied in
+    params.refinement = svs.RefinementParams(polish=False)
+    assert params.polish is False and params.refinement_iterations == 20
+    assert "GlobalSearchParams" not in repr(params) and "hypotheses=8" in repr(params)
+    assert params == svs.AlignParams(voxel_size=0.005, hypotheses=8, refinements=2, polish=False)
+    with pytest.raises(TypeError, match=r"AlignParams\.search takes GlobalSearchParams"):
+        svs.AlignParams(search=svs.LocalParams())
     with pytest.raises(TypeError, match="'search'"):
         svs.align(np.zeros((3, 3)), np.zeros((3, 3)), search=1)
 

@@ -34,6 +34,14 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "for several starts) to --out. Exit code 1 when a final error exceeds "
         f"{MAX_SERVO_ERROR_MM:g} mm or {MAX_SERVO_ERROR_DEG:g} degree.",
     )
+    _add_start_arguments(servo)
+    _add_servo_arguments(servo)
+    _add_output_arguments(servo)
+    servo.set_defaults(run=run_servo_sim)
+
+
+def _add_start_arguments(servo: Any) -> None:
+    """The arm and its start poses: --seed to --set."""
     servo.add_argument("--seed", type=int, default=0, help="seed of the start poses (default: 0)")
     servo.add_argument(
         "--starts",
@@ -57,6 +65,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "0.45 m and 60 deg (large), or beyond that up to 0.6 m and 90 deg with at least 30%% "
         "of the reference still in view and the camera above the table (extreme)",
     )
+
+
+def _add_servo_arguments(servo: Any) -> None:
+    """The servo and the simulation: --mode to --stop-at-joint-limits."""
     servo.add_argument(
         "--mode",
         choices=["iteration", "pose"],
@@ -96,6 +108,10 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "on (run_servo's stop_at_joint_limit=False; no joint ever crosses its limit): "
         "14-16 of 20 large iiwa starts instead of 12 (docs/kinematics.md)",
     )
+
+
+def _add_output_arguments(servo: Any) -> None:
+    """What is printed and drawn."""
     servo.add_argument(
         "--out",
         "--output",
@@ -115,7 +131,6 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "rotation error (deg), steps, reason and success",
     )
     servo.add_argument("--quiet", action="store_true", help="print only the summary")
-    servo.set_defaults(run=run_servo_sim)
 
 
 def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any) -> str:
