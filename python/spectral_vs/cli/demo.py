@@ -35,6 +35,14 @@ from spectral_vs.cli.translate import estimate_translation
 from spectral_vs.data import MILK_MODEL, MILK_SCENE, milk_split, synthetic_scene
 from spectral_vs.registration import prepare
 
+#: How the run that produced the returned pose ended (``AlignResult.stop_reason``), in words.
+STOP_REASONS = {
+    "converged": "converged",
+    "max_iterations": "iteration limit",
+    "max_seconds": "time budget",
+    "kept_start": "the search's hypothesis kept: Algorithm 1 from it ended less fit",
+}
+
 
 def add_parser(commands: Any, formatter: Any) -> None:
     """Add the subcommand to ``commands``, the parser's subparsers."""
@@ -160,9 +168,10 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
         f"error: rotation {errors[0]:.2f} deg, translation {errors[1]:.1f} mm at the model "
         f"centroid ({verdict}; limits {limits[0]:g} deg, {limits[1]:g} mm)"
     )
-    state = "converged" if result.converged else "not converged"
     print(
-        f"{_count(result.iterations, 'iteration')} ({state}), fitness {result.fitness:.3f}, "
+        f"Algorithm 1: {_count(result.iterations, 'iteration')} "
+        f"({STOP_REASONS[result.stop_reason]}), {_count(result.icp_iterations, 'ICP step')}; "
+        f"fitness {result.fitness:.3f}, confidence {result.confidence:.3f}, "
         f"correlation {result.correlation:.3f}, {_duration(elapsed)}"
     )
 
@@ -173,19 +182,50 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
     alignment = args.output / "alignment.png"
     with progress.stage(f"writing {convergence} and {alignment.name}"):
         title = f"{name}: {args.angle:g} deg, {1000 * voxel:g} mm voxels"
+        run, start, note = _convergence_run(model, scene, settings, result, args.axis)
         _write(
             convergence,
             plotting.plot_convergence,
-            result,
-            title=title,
+            run,
+            title=title + note,
             tolerance=settings.tolerance,
             voxel_size=voxel,
             ground_truth=truth,
             center=np.asarray(model.centroid()),
+            initial_T=start,
         )
         _write(alignment, plotting.render_alignment, model, scene, result, title=title)
     print(f"wrote {convergence} and {alignment}")
     return status
+
+
+#: How far the convergence figure's run starts from the result when the search kept its
+#: hypothesis, degrees: inside the local controller's basin (docs/alignment.md).
+CONVERGENCE_START_DEG = 20.0
+
+
+def _convergence_run(
+    model: Any, scene: Any, settings: Any, result: Any, axis: Any
+) -> tuple[Any, np.ndarray | None, str]:
+    """The run the convergence figure draws, its start and a note for its title: the
+    returned pose's Algorithm 1 run; or, where the search kept its hypothesis (a pose with
+    no run of its own), the paper's Algorithm 1 (no global search) from the result turned
+    CONVERGENCE_START_DEG about ``axis`` through the model's centroid, so that the figure
+    shows the local controller converging as the paper's Fig. 3 and 5 do."""
+    if result.history:
+        return result, None, ""
+    T = np.asarray(result.T_scene_model, dtype=float)
+    centre = T[:3, :3] @ np.asarray(model.centroid()) + T[:3, 3]
+    turn = rotation_about(axis, CONVERGENCE_START_DEG)
+    start = np.eye(4)
+    start[:3, :3] = turn @ T[:3, :3]
+    start[:3, 3] = turn @ (T[:3, 3] - centre) + centre
+    local = svs.AlignParams(
+        voxel_size=settings.voxel_size, threads=settings.threads, global_search=False
+    )
+    local.initial_guess = start
+    note = f"; Algorithm 1 from the result turned {CONVERGENCE_START_DEG:g} deg"
+    return svs.align(model, scene, local, downsample=False), start, note
 
 
 def _demo_clouds(
