@@ -67,6 +67,7 @@ from spectral_vs.servo.records import (
     _empty_record,  # noqa: F401  (read by the tests)
 )
 from spectral_vs.servo.relocalization import field_share
+from spectral_vs.servo.scale import ServoScale
 from spectral_vs.servo.settings import ServoParams
 from spectral_vs.servo.stages import (
     FaultParams,
@@ -115,6 +116,7 @@ __all__ = [
     "ServoLog",
     "ServoParams",
     "ServoRecord",
+    "ServoScale",
     "ServoStatus",
     "SpectralServo",
     "StopParams",
