@@ -59,9 +59,10 @@ class ServoScale:
         given, else on the whole reference.
     points : int
         The reference's points it was measured on.
-    voxel_size, downsample_size, max_translation, tracking_translation, max_depth, \
-jump_limit_translation, occlusion_margin, recover_standoff : float
-        The lengths the servo uses, m (given or derived).
+    voxel_size, downsample_size, max_translation, tracking_translation : float
+        The lengths the servo uses, m (given or derived; :class:`ServoParams`).
+    max_depth, jump_limit_translation, occlusion_margin, recover_standoff : float
+        The same.
     derived : tuple of str
         The names of the lengths that were derived (given as 0).
     """
