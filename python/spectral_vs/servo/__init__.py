@@ -35,6 +35,8 @@ in front of the camera) hold the robot still and the servo goes on (:data:`HOLDS
 The package, one module a job:
 
 - :mod:`~spectral_vs.servo.settings`: :class:`ServoParams`, grouped by stage;
+- :mod:`~spectral_vs.servo.scale`: the scale lengths derived from the reference
+  (:class:`ServoScale`);
 - :mod:`~spectral_vs.servo.controller`: :class:`SpectralServo` and its step, with the plane
   turn (:mod:`~spectral_vs.servo.plane_turn`), the sensor faults
   (:mod:`~spectral_vs.servo.faults`) and the relocalization and recovery
