@@ -185,8 +185,6 @@ def median(values: list[float]) -> float:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     params = servo_lib.ServoParams()
-    settings = params.align_params()
-    settings.threads = 1
     views: list[tuple[str, np.ndarray]] = []
     with sim.PyBulletRobot(sim.SimParams()) as robot:
         reference_depth = robot.capture_depth()
@@ -201,6 +199,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         normal_params = robot.params.camera.normals
     reference_cloud = sim.depth_to_cloud(reference_depth, intrinsics, normal_params)
     servo = servo_lib.SpectralServo(reference_cloud, params)
+    params = servo.params  # its scale lengths resolved from the reference
+    settings = params.align_params()
+    settings.threads = 1
     reference = servo.reference
     stages: dict[str, list[float]] = {}
     per_view = []

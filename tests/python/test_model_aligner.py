@@ -16,6 +16,10 @@ from spectral_vs import _core
 from spectral_vs.registration import prepare
 from spectral_vs.servo import ServoParams, SpectralServo, pose_error
 
+#: The scale lengths these tests were written at (given: they test the prepared
+#: reference, not the servo's scale rule).
+SCALE = {"voxel_size": 0.015, "max_translation": 0.3, "tracking_translation": 0.1}
+
 
 def prepared(cloud: svs.PointCloud) -> svs.PointCloud:
     return prepare(cloud, "cloud", 0.015, True, (0.0, 0.0, 0.0))
@@ -51,7 +55,7 @@ def assert_same(a: svs.AlignResult, b: svs.AlignResult) -> None:
 @pytest.mark.parametrize("mode", ["iteration", "pose"])
 def test_model_aligner_matches_plain_alignment_view_after_view(views, mode):
     reference, currents = views
-    params = ServoParams(mode=mode).align_params()
+    params = ServoParams(mode=mode, **SCALE).align_params()
     aligner = _core.ModelAligner(reference, params)
     for current in currents:
         assert_same(aligner.align(current), _core._align(reference, current, params))
@@ -71,7 +75,7 @@ def test_model_aligner_matches_plain_alignment_view_after_view(views, mode):
 
 def test_model_aligner_initial_guess_and_properties(views):
     reference, currents = views
-    params = ServoParams().align_params()
+    params = ServoParams(**SCALE).align_params()
     aligner = _core.ModelAligner(reference, params)
     guess = np.linalg.inv(camera_pose((0.03, -0.02, 0.01), (2.0, -1.0, 3.0))) @ camera_pose()
     params.initial_guess = guess
@@ -93,7 +97,9 @@ def test_servo_estimate_is_the_plain_alignment(views):
     desired = camera_pose()
     current = camera_pose((0.01, -0.01, 0.005), (0.5, -0.5, 0.5))
     # Downsampled to half a voxel, as prepared() does.
-    servo = SpectralServo(view(scene, desired), ServoParams(mode="pose", downsample_size=0.0075))
+    servo = SpectralServo(
+        view(scene, desired), ServoParams(mode="pose", downsample_size=0.0075, **SCALE)
+    )
     T, result = servo.estimate(view(scene, current))
     plain = _core._align(servo.reference, prepared(view(scene, current)), servo._align_params)
     assert_same(result, plain)
@@ -109,7 +115,7 @@ def test_servo_registrations_skip_the_verification_and_change_nothing(views):
     bit, as the verified call, on the full and the tracking bound; only the verification's
     figures stay 0."""
     reference, currents = views
-    servo_params = ServoParams()
+    servo_params = ServoParams(**SCALE)
     assert svs.AlignParams().verify is True
     assert servo_params.align_params().verify is False
     for bound in (servo_params.max_translation, servo_params.tracking_translation):

@@ -92,7 +92,7 @@ def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
     current = moved(points, normals, T_current_reference)
     n_current = T_current_reference[:3, :3] @ [0.0, 0.0, -1.0]
     d_current = 0.55 - n_current @ T_current_reference[:3, 3]  # the camera's distance
-    expected_t = n_current * (0.55 + params.recover_standoff - d_current)
+    expected_t = n_current * (0.55 + servo.params.recover_standoff - d_current)
     for step in range(2):
         _, status, record = servo.step_record(current, np.eye(4), now=0.1 * step)
         assert status.state == "running" and record.recovery == "level"
@@ -116,7 +116,11 @@ def test_without_a_plane_the_recovery_backs_off_along_the_optical_axis():
     points, normals = table_scene()
     sides = np.abs(normals[:, 2]) < 0.5
     params = ServoParams(
-        relocalize_score=1.0, recover_score=1.0, relocalize_retry=1, recover_after=1
+        relocalize_score=1.0,
+        recover_score=1.0,
+        relocalize_retry=1,
+        recover_after=1,
+        recover_standoff=0.15,
     )
     servo = SpectralServo(PointCloud(points[sides], normals[sides]), params)
     current = PointCloud(points[sides], normals[sides])

@@ -83,8 +83,8 @@ def test_fault_settings_are_checked():
         ServoParams(max_outage=-0.1)
     with pytest.raises(ValueError, match="max_outage"):
         ServoParams(max_outage=float("inf"))
-    with pytest.raises(ValueError, match="occlusion_margin must be > 0 m"):
-        ServoParams(occlusion_margin=0.0)
+    with pytest.raises(ValueError, match="occlusion_margin must be >= 0 m"):
+        ServoParams(occlusion_margin=-0.01)  # 0: derived from the reference
     with pytest.raises(ValueError, match=r"occlusion_min_share must be in \[0, 1\]"):
         ServoParams(occlusion_min_share=1.5)
 

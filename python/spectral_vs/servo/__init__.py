@@ -35,6 +35,8 @@ in front of the camera) hold the robot still and the servo goes on (:data:`HOLDS
 The package, one module a job:
 
 - :mod:`~spectral_vs.servo.settings`: :class:`ServoParams`, grouped by stage;
+- :mod:`~spectral_vs.servo.scale`: the scale lengths derived from the reference
+  (:class:`ServoScale`);
 - :mod:`~spectral_vs.servo.controller`: :class:`SpectralServo` and its step, with the plane
   turn (:mod:`~spectral_vs.servo.plane_turn`), the sensor faults
   (:mod:`~spectral_vs.servo.faults`) and the relocalization and recovery
@@ -67,6 +69,7 @@ from spectral_vs.servo.records import (
     _empty_record,  # noqa: F401  (read by the tests)
 )
 from spectral_vs.servo.relocalization import field_share
+from spectral_vs.servo.scale import ServoScale
 from spectral_vs.servo.settings import ServoParams
 from spectral_vs.servo.stages import (
     FaultParams,
@@ -115,6 +118,7 @@ __all__ = [
     "ServoLog",
     "ServoParams",
     "ServoRecord",
+    "ServoScale",
     "ServoStatus",
     "SpectralServo",
     "StopParams",

@@ -28,7 +28,16 @@ from spectral_vs.servo.records import (
     _empty_record,
 )
 from spectral_vs.servo.relocalization import Relocalization
+from spectral_vs.servo.scale import resolve_scale
 from spectral_vs.servo.settings import ServoParams
+
+
+def _check_points(reference: PointCloud, min_points: int) -> None:
+    """Refuse a reference with fewer than ``min_points`` points (ValueError)."""
+    if len(reference) < min_points:
+        raise ValueError(
+            f"reference has {len(reference)} points, fewer than min_points = {min_points}"
+        )
 
 
 class SpectralServo(SensorFaults, Relocalization):
@@ -41,7 +50,15 @@ class SpectralServo(SensorFaults, Relocalization):
         (N, 6) arrays (points, normals) are accepted. Missing normals are estimated and
         turned toward the camera origin.
     params : ServoParams, optional
-        Settings; defaults to ``ServoParams()``.
+        Settings; defaults to ``ServoParams()``. Its scale lengths given as 0 (the
+        defaults) are derived from the reference here (:mod:`spectral_vs.servo.scale`).
+
+    Attributes
+    ----------
+    params : ServoParams
+        The settings used: a copy of ``params`` with every scale length resolved.
+    scale : ServoScale
+        The scale lengths resolved (m), the reference's extent and which were derived.
 
     Raises
     ------
@@ -50,13 +67,12 @@ class SpectralServo(SensorFaults, Relocalization):
     """
 
     def __init__(self, reference: CloudLike, params: ServoParams | None = None) -> None:
-        self.params = params if params is not None else ServoParams()
-        cloud = self._crop(as_cloud(reference, "reference"))
-        if len(cloud) < self.params.faults.min_points:
-            raise ValueError(
-                f"reference has {len(cloud)} points, fewer than min_points = "
-                f"{self.params.faults.min_points}"
-            )
+        given = params if params is not None else ServoParams()
+        raw = as_cloud(reference, "reference")
+        _check_points(raw, given.faults.min_points)  # before its scale is measured
+        self.params, self.scale = resolve_scale(given, raw)
+        cloud = self._crop(raw)
+        _check_points(cloud, given.faults.min_points)
         self._align_params = self.params.align_params()
         self._view_params = ViewAlignParams(**self.params.relocalization.view_overrides)
         self.reference = self._prepare(cloud, "reference")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -124,8 +125,24 @@ class ServoParams:
             and 0 < self.registration.tracking_translation < self.registration.max_translation
         )
 
+    def resolved(self, reference: Any) -> ServoParams:
+        """A copy with every scale length given as 0 derived from ``reference`` (the cloud
+        at the desired pose, camera frame, m): the settings a
+        :class:`~spectral_vs.servo.SpectralServo` of that reference uses
+        (:func:`spectral_vs.servo.scale.resolve_scale`)."""
+        from spectral_vs.registration import as_cloud
+        from spectral_vs.servo.scale import resolve_scale
+
+        return resolve_scale(self, as_cloud(reference, "reference"))[0]
+
     def align_params(self) -> AlignParams:
-        """The :class:`AlignParams` of one registration in this mode."""
+        """The :class:`AlignParams` of one registration in this mode; the scale lengths
+        must be resolved (:meth:`resolved`)."""
+        if self.registration.voxel_size == 0:
+            raise ValueError(
+                "voxel_size is 0 (derived from the reference): call align_params() on "
+                "ServoParams.resolved(reference)"
+            )
         params = AlignParams()
         params.voxel_size = self.registration.voxel_size
         params.bandwidth = self.registration.bandwidth
@@ -133,7 +150,9 @@ class ServoParams:
         params.initial_guess = np.eye(4)
         # The servo reads only the fitness: no pose verification (2 ms per step).
         params.verify = False
-        unbounded = self.registration.mode == "pose" and self.registration.global_search
+        unbounded = (
+            self.registration.mode == "pose" and self.registration.global_search
+        ) or math.isinf(self.registration.max_translation)
         params.max_translation = 0.0 if unbounded else self.registration.max_translation
         if self.registration.mode == "iteration":
             params.global_search = False

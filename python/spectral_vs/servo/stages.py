@@ -1,5 +1,7 @@
 """The settings of each stage of the servo, one small dataclass a stage; every field has
-its unit. :class:`~spectral_vs.servo.ServoParams` holds one of each."""
+its unit. :class:`~spectral_vs.servo.ServoParams` holds one of each. The scale lengths
+default to 0: derived from the reference when the servo is constructed
+(:mod:`spectral_vs.servo.scale`)."""
 
 from __future__ import annotations
 
@@ -18,6 +20,19 @@ def _check_positive(params: Any, names: tuple[str, ...]) -> None:
         value = getattr(params, name)
         if not value > 0:  # also refuses NaN; inf turns a limit off
             raise ValueError(f"{name} must be > 0, got {value}")
+
+
+def _check_lengths(params: Any, names: tuple[str, ...], off: str = "") -> None:
+    """Refuse scale lengths ``names`` of ``params`` that are negative or NaN, or infinite
+    unless ``off`` says what ``inf`` means (ValueError naming the setting). 0 is valid:
+    derived from the reference when the servo is constructed (:mod:`spectral_vs.servo.scale`)."""
+    for name in names:
+        value = getattr(params, name)
+        if not (value >= 0 and (off or math.isfinite(value))):
+            meaning = f"0: derived from the reference{'; inf: ' + off if off else ''}"
+            raise ValueError(
+                f"{name} must be {'>= 0' if off else 'finite and >= 0'} m ({meaning}), got {value}"
+            )
 
 
 def _check_at_least(params: Any, name: str, low: int, unit: str = "") -> None:
@@ -50,12 +65,14 @@ class RegistrationParams:
     Attributes
     ----------
     voxel_size : float
-        Voxel edge of the registration, m. Whole-scene servoing over a table seen from about
-        0.5 m works at 1-2 cm: coarser voxels are faster and smooth the view changes.
+        Voxel edge of the registration, m; 0 (default): derived from the reference,
+        ``max(extent / 37, 3 extent / sqrt(N))`` (:mod:`spectral_vs.servo.scale`; 15 mm on
+        the simulated table seen from 0.55 m). Whole-scene servoing over a table seen from
+        about 0.5 m works at 1-2 cm: coarser voxels are faster and smooth the view changes.
     downsample_size : float
-        Both clouds are downsampled to voxels of this edge before the registration, m; 0:
-        half of ``voxel_size``, as :func:`spectral_vs.align` does. At a whole voxel (the
-        default) a near-goal step's registration took 1.3 ms instead of 2.5 (a quarter of
+        Both clouds are downsampled to voxels of this edge before the registration, m; 0
+        (default): one ``voxel_size``. At a whole voxel a near-goal step's registration
+        took 1.3 ms instead of 2.5 at half a voxel (a quarter of
         the points for the EGI, the grid and the fitness), and the 20 moderate starts of
         ``servo-sim`` converged as at half a voxel, to 0.5-1.7 mm and under 0.15 degree
         (docs/servoing.md).
@@ -86,25 +103,29 @@ class RegistrationParams:
         found. Off by default (measured in docs/servoing.md).
     max_translation : float
         Largest translation, per axis, that one registration seeks from its initial guess,
-        m (``AlignParams.max_translation``): the phase-correlation grid then holds the two
+        m (``AlignParams.max_translation``); 0 (default): 0.54 extents of the reference
+        (0.3 m on the simulated table). The phase-correlation grid then holds the two
         views grown by this instead of by the reference view's radius (about 0.5 m above
         the table), a grid 3-8 times smaller. Must exceed the displacement of the view's
-        centroid, which a camera rotation adds to (30 degrees at 0.55 m: 0.28 m). 0: the
-        paper's unbounded grid. Measured in docs/servoing.md.
+        centroid, which a camera rotation adds to (30 degrees at 0.55 m: 0.28 m). ``inf``:
+        the paper's unbounded grid. Measured in docs/servoing.md.
     tracking_translation : float
         Once the registration has locked on (the watchdog is armed), or from the step after
         a relocalization was taken, the search is bounded
         by this instead of ``max_translation`` while the previous estimate, carried along
         the camera's measured motion, moves the reference's centroid by at most half of it
-        from where the registration starts, m: near the goal the phase-correlation grid is
+        from where the registration starts, m; 0 (default): 0.18 extents of the reference
+        (0.1 m on the simulated table). Near the goal the phase-correlation grid is
         then about 2 times smaller (measured 4.6 to 2.8 ms per registration with 0.1 m). A
         second prepared reference keeps its own FFT plans. Once locked on, a bounded
         estimate whose fitness is below ``watchdog_fitness`` is redone with
         ``max_translation`` (the answer may lie beyond the bound: a jump that the watchdog
-        must see); before, the estimate is the carried one. 0, or not
-        below ``max_translation``: always ``max_translation``.
+        must see); before, the estimate is the carried one. ``inf``, or not below
+        ``max_translation``: always ``max_translation``.
     max_depth : float
-        Points farther than this along the optical axis are ignored (both clouds), m. The
+        Points farther than this along the optical axis are ignored (both clouds), m; 0
+        (default): the reference's farthest point plus 1.7 extents of it (1.5 m on the
+        simulated table; the reference itself is never cropped). The
         registration grid spans both clouds: a camera turned toward the horizon would
         otherwise add the far floor and walls and slow every step (measured: from 0.1 to
         over 1 s per step). ``inf`` keeps everything.
@@ -112,31 +133,27 @@ class RegistrationParams:
         Further :class:`AlignParams` fields, e.g. ``{"threads": 2}``.
     """
 
-    voxel_size: float = 0.015
-    downsample_size: float = 0.015
+    voxel_size: float = 0.0
+    downsample_size: float = 0.0
     bandwidth: int = 8
     max_rotation_step: float = 0.05
     mode: ServoMode = "iteration"
     global_search: bool = False
     max_iterations: int = 30
     warm_start: bool = False
-    max_translation: float = 0.3
-    tracking_translation: float = 0.1
-    max_depth: float = 1.5
+    max_translation: float = 0.0
+    tracking_translation: float = 0.0
+    max_depth: float = 0.0
     align_overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.mode not in ("iteration", "pose"):
             raise ValueError(f"mode must be 'iteration' or 'pose', got {self.mode!r}")
-        _check_positive(self, ("voxel_size", "max_rotation_step", "max_depth"))
-        for name, meaning in (
-            ("max_translation", "0: unbounded"),
-            ("downsample_size", "0: voxel_size / 2"),
-            ("tracking_translation", "0: off"),
-        ):
-            value = getattr(self, name)
-            if not (value >= 0 and math.isfinite(value)):
-                raise ValueError(f"{name} must be >= 0 m ({meaning}), got {value}")
+        _check_positive(self, ("max_rotation_step",))
+        _check_lengths(self, ("voxel_size", "downsample_size"))
+        _check_lengths(self, ("max_translation",), "unbounded")
+        _check_lengths(self, ("tracking_translation",), "off")
+        _check_lengths(self, ("max_depth",), "keep every point")
         _check_at_least(self, "bandwidth", 2)
         _check_at_least(self, "max_iterations", 1)
         _check_keys(self.align_overrides, "align_overrides", AlignParams)
@@ -244,7 +261,8 @@ class WatchdogParams:
     ----------
     jump_limit_translation : float
         Watchdog: largest plausible change of the estimated translation from one step to the
-        next (after the camera's own measured motion is accounted for), m.
+        next (after the camera's own measured motion is accounted for), m; 0 (default): 0.18
+        extents of the reference (0.1 m on the simulated table); ``inf``: no limit.
     jump_limit_rotation : float
         Watchdog: same for the rotation, rad.
     watchdog_fitness : float
@@ -255,12 +273,13 @@ class WatchdogParams:
         the watchdog is never armed.
     """
 
-    jump_limit_translation: float = 0.1
+    jump_limit_translation: float = 0.0
     jump_limit_rotation: float = math.radians(10.0)
     watchdog_fitness: float = 0.9
 
     def __post_init__(self) -> None:
-        _check_positive(self, ("jump_limit_translation", "jump_limit_rotation"))
+        _check_lengths(self, ("jump_limit_translation",), "no limit")
+        _check_positive(self, ("jump_limit_rotation",))
         if not self.watchdog_fitness >= 0.0:
             raise ValueError(f"watchdog_fitness must be >= 0, got {self.watchdog_fitness}")
 
@@ -288,7 +307,8 @@ class FaultParams:
         this nearer to the camera than any surface of the reference could be (its nearest
         point, the reference placed by the previous estimate carried along the camera's
         measured motion; :func:`spectral_vs.sensor_faults.near_occluders`) are dropped
-        before the registration. It covers the estimate's error in depth and the depth
+        before the registration; 0 (default): 0.09 extents of the reference (0.05 m on the
+        simulated table). It covers the estimate's error in depth and the depth
         noise; a hand 0.25 m from the camera over the simulated table is 0.14-0.2 m nearer
         than the objects' tops. ``inf`` turns the test off.
     occlusion_min_share : float
@@ -302,7 +322,7 @@ class FaultParams:
 
     min_points: int = 500
     max_outage: float = 0.5
-    occlusion_margin: float = 0.05
+    occlusion_margin: float = 0.0
     occlusion_min_share: float = 0.01
 
     def __post_init__(self) -> None:
@@ -312,11 +332,7 @@ class FaultParams:
                 f"max_outage must be finite and >= 0 s (0: stop at the first fault), "
                 f"got {self.max_outage}"
             )
-        if not self.occlusion_margin > 0:
-            raise ValueError(
-                f"occlusion_margin must be > 0 m (inf: no occluder test), "
-                f"got {self.occlusion_margin}"
-            )
+        _check_lengths(self, ("occlusion_margin",), "no occluder test")
         _check_share(self, ("occlusion_min_share",))
 
 
@@ -408,7 +424,8 @@ class RecoveryParams:
         ``recover_standoff`` from where the recovery started. 0: no recovery.
     recover_standoff : float
         How much farther from the scene than the reference the recovery takes the camera,
-        m (>= 0): a farther view sees more of the scene.
+        m (> 0): a farther view sees more of the scene. 0 (default): 0.27 extents of the
+        reference (0.15 m on the simulated table).
     recover_score : float
         Least support score of a global registration taken during the recovery, in [0, 1]
         (``relocalize_score`` otherwise): the recovery widens the view step by step, so a
@@ -420,7 +437,7 @@ class RecoveryParams:
     """
 
     recover_after: int = 3
-    recover_standoff: float = 0.15
+    recover_standoff: float = 0.0
     recover_score: float = 0.08
     recover_steps: int = 60
 
@@ -431,10 +448,7 @@ class RecoveryParams:
                 f"recover_after must be >= 0 relocalizations (0: no recovery), "
                 f"got {self.recover_after}"
             )
-        if not (self.recover_standoff >= 0 and math.isfinite(self.recover_standoff)):
-            raise ValueError(
-                f"recover_standoff must be finite and >= 0 m, got {self.recover_standoff}"
-            )
+        _check_lengths(self, ("recover_standoff",))
         _check_at_least(self, "recover_steps", 1, "step")
 
 

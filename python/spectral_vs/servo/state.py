@@ -4,14 +4,13 @@ the state it keeps between steps, and the helpers every part uses (the crop to
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_downsample
 from spectral_vs.poses import rotation_vector
 from spectral_vs.registration import prepare
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
+from spectral_vs.servo.scale import ServoScale, crop_to_depth
 from spectral_vs.servo.settings import ServoParams
 
 
@@ -20,7 +19,8 @@ class ControllerState:
     (:class:`~spectral_vs.servo.faults.SensorFaults`,
     :class:`~spectral_vs.servo.relocalization.Relocalization`)."""
 
-    params: ServoParams
+    params: ServoParams  #: the settings with every scale length resolved
+    scale: ServoScale  #: the scale lengths resolved, and the reference's extent
     reference: PointCloud  #: the reference, downsampled, with normals
     _reference_view: PointCloud  #: the reference as captured (cropped), for relocalization
     _view_params: ViewAlignParams
@@ -53,20 +53,11 @@ class ControllerState:
 
     def _crop(self, cloud: PointCloud) -> PointCloud:
         """The points within ``max_depth`` of the camera (along its optical axis)."""
-        if not math.isfinite(self.params.registration.max_depth) or len(cloud) == 0:
-            return cloud
-        points = np.asarray(cloud.points)
-        if (
-            points[:, 2].max() <= self.params.registration.max_depth
-        ):  # the usual case, without a mask
-            return cloud
-        return cloud.select(
-            points[:, 2] <= self.params.registration.max_depth
-        )  # copied in the core
+        return crop_to_depth(cloud, self.params.registration.max_depth)
 
     def _prepare(self, cloud: PointCloud, argument: str) -> PointCloud:
-        """The cloud downsampled to ``downsample_size``, with normals."""
-        size = self.params.registration.downsample_size or self.params.registration.voxel_size / 2
+        """The cloud downsampled to ``downsample_size`` (resolved), with normals."""
+        size = self.params.registration.downsample_size
         try:
             cloud = voxel_downsample(cloud, size) if len(cloud) else cloud
         except ValueError as error:
