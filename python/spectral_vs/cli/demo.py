@@ -182,7 +182,7 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
     alignment = args.output / "alignment.png"
     with progress.stage(f"writing {convergence} and {alignment.name}"):
         title = f"{name}: {args.angle:g} deg, {1000 * voxel:g} mm voxels"
-        run, start, note = _convergence_run(model, scene, settings, result, args.axis)
+        run, run_start, note = _convergence_run(model, scene, settings, result, args.axis)
         _write(
             convergence,
             plotting.plot_convergence,
@@ -192,7 +192,7 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
             voxel_size=voxel,
             ground_truth=truth,
             center=np.asarray(model.centroid()),
-            initial_T=start,
+            initial_T=run_start,
         )
         _write(alignment, plotting.render_alignment, model, scene, result, title=title)
     print(f"wrote {convergence} and {alignment}")
