@@ -59,9 +59,11 @@ AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, Transla
     record.rotation_gradient = c.gradient.norm();
     record.correlation = c.value;
     record.translation_peak = shift.peak;
-    record.translation_cost = source.translation_cost();
-    record.rotation_cost = rotation_cost(problem.scene_coefficients, problem.model_coefficients,
-                                         pose.R, params.scene.bandwidth, true);
+    if (problem.costs) {
+      record.translation_cost = source.translation_cost();
+      record.rotation_cost = rotation_cost(problem.scene_coefficients, problem.model_coefficients,
+                                           pose.R, params.scene.bandwidth, true);
+    }
     record.T_scene_model = problem.model.transform_of(pose);
     result.history.push_back(record);
     result.iterations = iteration + 1;

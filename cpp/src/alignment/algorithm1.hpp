@@ -49,6 +49,7 @@ struct Algorithm1Problem {
   MovingModel& model;
   const AlignParams& params;  // local (gains, step law, tolerance), scene (voxel, bandwidth)
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
+  bool costs = true;  ///< J_t and J_r in the history's records; false: left 0 (not read)
 };
 
 /// The rotation of one iteration from the correlation at the current rotation: the

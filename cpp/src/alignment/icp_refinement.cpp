@@ -1,5 +1,7 @@
 #include "alignment/icp_refinement.hpp"
 
+#include "alignment/scene_map.hpp"
+
 #include <spectral_vs/rotation/so3.hpp>
 
 #include <Eigen/Dense>
@@ -34,6 +36,8 @@ IcpScene::IcpScene(const PointCloud& scene, const Eigen::AlignedBox3d& around, d
     rows_.push_back(row);
   }
   for (std::size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
+  points_ = rows_of(scene.points(), rows_);
+  normals_ = rows_of(scene.normals(), rows_);
 }
 
 Eigen::Index IcpScene::nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& n,
@@ -60,25 +64,14 @@ Eigen::Index IcpScene::nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& 
         if (gap(0, dx + 1) + gap(1, dy + 1) + gap(2, dz + 1) >= best_squared) continue;
         const std::int64_t cell = linear(neighbour);
         for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
-          const Eigen::Index i = rows_[k];
-          const double squared = (scene_.points().row(i).transpose() - p).squaredNorm();
-          if (squared < best_squared && scene_.normals().row(i).dot(n) >= min_cosine) {
+          const double squared = (points_.row(Eigen::Index(k)).transpose() - p).squaredNorm();
+          if (squared < best_squared && normals_.row(Eigen::Index(k)).dot(n) >= min_cosine) {
             best_squared = squared;
-            best = i;
+            best = rows_[k];
           }
         }
       }
   return best;
-}
-
-Eigen::Array3i IcpScene::cell_of(const Eigen::Vector3d& p) const {
-  // Clamped into [-1, dims]: a point outside the box has no neighbours in it beyond.
-  const Eigen::Array3d v = ((p - origin_) / cell_).array().floor();
-  return v.max(-1.0).min(dims_.cast<double>()).cast<int>();
-}
-
-std::int64_t IcpScene::linear(const Eigen::Array3i& c) const {
-  return (std::int64_t(c.x()) * dims_.y() + c.y()) * dims_.z() + c.z();
 }
 
 IcpOutcome refine_point_to_plane(const PointCloud& model, const PointCloud& scene,

@@ -43,8 +43,15 @@ class IcpScene {
   const PointCloud& cloud() const { return scene_; }
 
  private:
-  Eigen::Array3i cell_of(const Eigen::Vector3d& p) const;
-  std::int64_t linear(const Eigen::Array3i& c) const;
+  // Defined here so that the queries inline them.
+  Eigen::Array3i cell_of(const Eigen::Vector3d& p) const {
+    // Clamped into [-1, dims]: a point outside the box has no neighbours in it beyond.
+    const Eigen::Array3d v = ((p - origin_) / cell_).array().floor();
+    return v.max(-1.0).min(dims_.cast<double>()).cast<int>();
+  }
+  std::int64_t linear(const Eigen::Array3i& c) const {
+    return (std::int64_t(c.x()) * dims_.y() + c.y()) * dims_.z() + c.z();
+  }
 
   const PointCloud& scene_;
   double cell_ = 0.0;
@@ -52,6 +59,9 @@ class IcpScene {
   Eigen::Array3i dims_;
   std::vector<std::size_t> start_;  // per cell, where its rows begin in rows_
   std::vector<Eigen::Index> rows_;
+  // The points and normals at rows_, in that order: a query reads each cell's
+  // contiguously rather than scattered over the scene.
+  Points points_, normals_;
 };
 
 /// `refine_point_to_plane` on a scene prepared as an IcpScene (settings.max_distance at

@@ -322,7 +322,6 @@ SceneTranslation::SceneTranslation(const Points& in_reach, const Eigen::AlignedB
       phase_(spec_, params),
       max_shift_(Eigen::Vector3i::Constant(voxels_along(max_translation, voxel_size, limits))) {
   voxelize_into(in_reach, spec_, occupancy, target_, limits);
-  target_energy_ = grid_energy(target_);
   phase_.set_target(target_);
 }
 
@@ -336,7 +335,6 @@ SceneTranslation::SceneTranslation(const SceneMap& scene, const GridSpec& spec,
       phase_(spec_, params),
       max_shift_(max_shift) {
   target_ = voxelize(scene.cloud(), spec_, occupancy, limits);
-  target_energy_ = grid_energy(target_);
   phase_.set_target(target_);
 }
 
@@ -347,7 +345,8 @@ TranslationEstimate SceneTranslation::estimate(const Points& moved) {
 }
 
 double SceneTranslation::translation_cost() const {
-  return spectral_vs::translation_cost(moving_, target_, Eigen::Vector3i::Zero(), target_energy_);
+  if (!target_energy_) target_energy_ = grid_energy(target_);
+  return spectral_vs::translation_cost(moving_, target_, Eigen::Vector3i::Zero(), *target_energy_);
 }
 
 namespace {

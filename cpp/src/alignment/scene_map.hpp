@@ -165,7 +165,9 @@ class SceneTranslation : public TranslationSource {
   GridSpec spec_;
   PhaseCorrelation phase_;
   VoxelGrid target_, moving_;
-  double target_energy_ = 0.0;
+  // Sum of the target's squared voxels, for J_t: summed at the first translation_cost()
+  // (a caller that reads no J_t, as align_views, never pays for it).
+  mutable std::optional<double> target_energy_;
   std::optional<Eigen::Vector3i> max_shift_;  // voxels; none: the whole grid
 };
 

@@ -376,7 +376,8 @@ ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
                                        views.reference_coefficients,
                                        views.model,
                                        views.loop,
-                                       views.deadline};
+                                       views.deadline,
+                                       false};  // its history is not read
   detail::run_algorithm1(loop, pose, grid, views.params.refinement_iterations);
   const Transform refined = views.model.transform_of(pose);
   const ViewSupport refined_support = views.support.of(refined, kCoarseTolerance);
