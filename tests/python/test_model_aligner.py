@@ -191,7 +191,7 @@ def test_model_aligner_keeps_a_bounded_number_of_fft_plans(views):
     nothing is kept per call or per size beyond the bound (the soak's memory,
     docs/reliability.md)."""
     reference, currents = views
-    aligner = _core.ModelAligner(reference, ServoParams().align_params())
+    aligner = _core.ModelAligner(reference, ServoParams(**SCALE).align_params())
     starts = []
     for degrees in (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0):
         c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
