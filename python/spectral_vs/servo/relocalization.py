@@ -81,7 +81,7 @@ class Relocalization(ControllerState):
         if self._confirmed:
             return since >= p.relocalization.relocalize_interval
         if self._recovering():
-            return since >= p.relocalization.relocalize_retry
+            return since >= p.recovery.recover_retry
         growth = p.relocalization.relocalize_backoff ** max(0, self._unconfirmed - 1)
         return since >= min(
             p.relocalization.relocalize_interval, p.relocalization.relocalize_retry * growth

@@ -415,7 +415,7 @@ class RecoveryParams:
         "Recovery"): after this many relocalizations in a row under ``relocalize_score``,
         with none taken yet, the servo stops following its local estimate (which, from a
         view that shares little with the reference, drifts farther off) and moves the
-        camera to widen the overlap, relocalizing on at ``relocalize_retry``. When both the
+        camera to widen the overlap, relocalizing on at ``recover_retry``. When both the
         reference and the current view have a dominant plane (``min_plane_share``, within
         ``plane_cone``; a table top), it levels the camera onto it: the rotation that takes
         the reference's plane normal to where the current view sees its own, about the
@@ -434,12 +434,17 @@ class RecoveryParams:
     recover_steps : int
         Longest recovery, steps (>= 1): when no relocalization was taken within it, the
         servo stops with ``"lost"``.
+    recover_retry : int
+        Steps from one relocalization of the recovery to the next (>= 1). A recovery step
+        without one costs about 2 ms, with one 40-90 ms (320 x 240): the spacing sets how
+        much of a recovering run is global registration.
     """
 
-    recover_after: int = 3
+    recover_after: int = 1
     recover_standoff: float = 0.0
     recover_score: float = 0.08
     recover_steps: int = 60
+    recover_retry: int = 8
 
     def __post_init__(self) -> None:
         _check_share(self, ("recover_score",))
@@ -450,6 +455,7 @@ class RecoveryParams:
             )
         _check_lengths(self, ("recover_standoff",))
         _check_at_least(self, "recover_steps", 1, "step")
+        _check_at_least(self, "recover_retry", 1, "step")
 
 
 @dataclass
