@@ -254,6 +254,28 @@ def summary_table(summary: list[dict]) -> str:
     return report_lib.markdown(header, rows)
 
 
+def merged(before: dict, new: dict) -> dict:
+    """``new``'s records with ``before``'s of the (family, method) cells ``new`` did not
+    run; ``provenance`` says which run each method's records come from."""
+    ran = {(r["family"], r["method"]) for r in new["records"]}
+    kept = [r for r in before["records"] if (r["family"], r["method"]) not in ran]
+    fields = ("command", "date", "commit", "core_sha256", "load_average")
+    provenance = dict(before.get("provenance", {}))
+    for method in {r["method"] for r in kept}:
+        provenance.setdefault(method, {k: before.get(k) for k in fields})
+    for method in new["methods"]:
+        provenance[method] = {k: new[k] for k in fields}
+    records = kept + new["records"]
+    order = {family: i for i, family in enumerate(FAMILIES)}
+    records.sort(key=lambda r: (order.get(r["family"], len(order)), r["pair"]))
+    return new | {
+        "records": records,
+        "summary": summarize(records),
+        "methods": sorted({r["method"] for r in records}, key=list(METHODS).index),
+        "provenance": provenance,
+    }
+
+
 def report(results: dict) -> None:
     """The tables between the ``view-pairs`` markers of docs/benchmarks.md."""
     versions = ", ".join(f"{k} {v}" for k, v in results["versions"].items())
@@ -265,6 +287,11 @@ def report(results: dict) -> None:
         f"load average {results['load_average'][0]:.1f} at the start, "
         f"{results['load_average'][1]:.1f} at the end (other jobs shared the cores).",
     ]
+    for method, run in results.get("provenance", {}).items():
+        lines.append(
+            f"- {TITLES[method]}: `{run['command']}`, commit {run['commit']} (module "
+            f"{run['core_sha256']}), {run['date']}, load average {run['load_average'][0]:.1f}."
+        )
     if results.get("skipped"):
         lines.append(f"Skipped: {results['skipped']}.")
     blocks = [
@@ -294,6 +321,12 @@ def main() -> None:
     parser.add_argument("--output", type=Path, default=RESULTS, help="JSON results")
     parser.add_argument(
         "--report-only", action="store_true", help="redo the docs table from --output"
+    )
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="keep --output's records of the methods not run (their commit and load stay "
+        "in its provenance)",
     )
     args = parser.parse_args()
     if args.report_only:
@@ -338,6 +371,8 @@ def main() -> None:
         "summary": summarize(records),
         "records": records,
     }  # fmt: skip
+    if args.merge and args.output.is_file():
+        results = merged(json.loads(args.output.read_text()), results)
     if report_lib.write_results(results, args.output, RESULTS, report):
         print(f"wrote {args.output} and the table in {report_lib.BENCHMARKS_DOC}")
     else:
