@@ -62,7 +62,8 @@ def run_one(robot: str, name: str, seed: int, starts: int) -> None:
     load = os.getloadavg()[0]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     out = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
-    if out.returncode != 0:
+    # servo-sim exits with 1 when a start failed: still a run, with its JSON.
+    if out.returncode not in (0, 1) or not out.stdout.strip():
         raise SystemExit(f"{' '.join(command[2:])} failed:\n{out.stderr[-2000:]}")
     data = json.loads(out.stdout)
     data["load_average"] = [round(load, 2), round(os.getloadavg()[0], 2)]
