@@ -59,6 +59,23 @@ def moved(points: np.ndarray, normals: np.ndarray, T: np.ndarray) -> PointCloud:
     return PointCloud(points @ T[:3, :3].T + T[:3, 3], normals @ T[:3, :3].T)
 
 
+def never_registering(**overrides) -> ServoParams:
+    """Settings under which no global registration is ever taken (``relocalize_score`` and
+    ``recover_score`` 1) and the recovery starts after the first (``recover_after`` 1)."""
+    return ServoParams(
+        relocalize_score=1.0, recover_score=1.0, relocalize_retry=1, recover_after=1, **overrides
+    )
+
+
+def tilted_view(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, PointCloud]:
+    """``T_current_reference`` of a camera tilted by 35 degrees about its x axis and 0.2 m
+    nearer the table, and its view of the scene."""
+    T_current_reference = np.eye(4)
+    T_current_reference[:3, :3] = rotation_matrix([math.radians(35.0), 0.0, 0.0])
+    T_current_reference[:3, 3] = [0.0, 0.05, -0.2]
+    return T_current_reference, moved(points, normals, T_current_reference)
+
+
 def test_dominant_plane_finds_the_table_and_its_distance():
     points, normals = table_scene()
     plane = dominant_plane(points, normals, math.radians(20), 0.3)
@@ -78,18 +95,8 @@ def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
     # undone about the camera's origin, at the reference's 0.55 m from the plane plus
     # recover_standoff.
     points, normals = table_scene()
-    params = ServoParams(
-        relocalize_score=1.0,
-        recover_score=1.0,
-        relocalize_retry=1,
-        recover_after=1,
-        recover_steps=2,
-    )
-    servo = SpectralServo(PointCloud(points, normals), params)
-    T_current_reference = np.eye(4)
-    T_current_reference[:3, :3] = rotation_matrix([math.radians(35.0), 0.0, 0.0])
-    T_current_reference[:3, 3] = [0.0, 0.05, -0.2]
-    current = moved(points, normals, T_current_reference)
+    servo = SpectralServo(PointCloud(points, normals), never_registering(recover_steps=2))
+    T_current_reference, current = tilted_view(points, normals)
     n_current = T_current_reference[:3, :3] @ [0.0, 0.0, -1.0]
     d_current = 0.55 - n_current @ T_current_reference[:3, 3]  # the camera's distance
     expected_t = n_current * (0.55 + servo.params.recover_standoff - d_current)
@@ -141,19 +148,9 @@ def test_the_recovery_relocalizes_every_recover_retry_steps():
     # registrations (40-90 ms each at 320 x 240, against 2 ms for a recovery step without
     # one) come every recover_retry steps, not every relocalize_retry.
     points, normals = table_scene()
-    params = ServoParams(
-        relocalize_score=1.0,
-        recover_score=1.0,
-        relocalize_retry=1,
-        recover_after=1,
-        recover_retry=3,
-        recover_steps=8,
-    )
+    params = never_registering(recover_retry=3, recover_steps=8)
     servo = SpectralServo(PointCloud(points, normals), params)
-    T_current_reference = np.eye(4)
-    T_current_reference[:3, :3] = rotation_matrix([math.radians(35.0), 0.0, 0.0])
-    T_current_reference[:3, 3] = [0.0, 0.05, -0.2]
-    current = moved(points, normals, T_current_reference)
+    _, current = tilted_view(points, normals)
     records = [servo.step_record(current, np.eye(4), now=0.1 * k)[2] for k in range(8)]
     assert all(r.recovery == "level" for r in records)
     attempts = [r.step for r in records if not math.isnan(r.relocalization_score)]
