@@ -274,6 +274,67 @@ TEST_F(IcpOnAResampledCopy, FarFromTheSceneThePoseIsReturnedUnchanged) {
   EXPECT_TRUE(outcome.T_scene_model.isApprox(away));
 }
 
+// The nearest scene point within `max_distance` whose normal agrees, by trying every one.
+double brute_force_nearest(const PointCloud& scene, const Eigen::Vector3d& p,
+                           const Eigen::Vector3d& n, double max_distance, double min_cosine) {
+  double best = max_distance * max_distance;
+  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
+    const double squared = (scene.points().row(i).transpose() - p).squaredNorm();
+    if (squared < best && scene.normals().row(i).dot(n) >= min_cosine) best = squared;
+  }
+  return best;
+}
+
+TEST(IcpScene, FindsTheNearestAgreeingPointAsBruteForceDoes) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(0.0, 0.1);
+  std::normal_distribution<double> gauss;
+  const auto direction = [&] {
+    return Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)).normalized();
+  };
+  Points points(3000, 3), normals(3000, 3);
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    points.row(i) << uniform(rng), uniform(rng), uniform(rng);
+    normals.row(i) = direction().transpose();
+  }
+  const PointCloud scene(points, normals);
+  const double reach = 0.01;  // cells of 1 cm
+  const Eigen::AlignedBox3d around(Eigen::Vector3d::Constant(-0.02),
+                                   Eigen::Vector3d::Constant(0.12));
+  const IcpScene grid(scene, around, reach);
+  int found = 0;
+  for (int query = 0; query < 3000; ++query) {
+    const Eigen::Vector3d p(uniform(rng) * 1.2 - 0.01, uniform(rng), uniform(rng));
+    const Eigen::Vector3d n = direction();
+    const double distance = reach * (query % 3 == 0 ? 0.4 : 1.0);
+    const Eigen::Index row = grid.nearest(p, n, distance, 0.5);
+    const double best = brute_force_nearest(scene, p, n, distance, 0.5);
+    if (row < 0) {
+      EXPECT_EQ(best, distance * distance) << "query " << query;
+      continue;
+    }
+    ++found;
+    EXPECT_EQ((points.row(row).transpose() - p).squaredNorm(), best) << "query " << query;
+    EXPECT_GE(normals.row(row).dot(n), 0.5);
+  }
+  EXPECT_GT(found, 1000);
+}
+
+TEST(IcpScene, OfEquallyNearPointsTakesTheOneInTheFirstCell) {
+  // Queries on a cell boundary, exactly midway between two points (all values binary
+  // fractions): the point of the lower cell, although the query's own cell is the upper.
+  Points points(3, 3), normals(3, 3);
+  points << 0.125, 0.5, 0.5, 0.375, 0.5, 0.5, 0.625, 0.5, 0.5;
+  normals << 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0;
+  const PointCloud scene(points, normals);
+  const IcpScene grid(scene, Eigen::AlignedBox3d(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones()),
+                      0.25);
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  EXPECT_EQ(grid.nearest(Eigen::Vector3d(0.25, 0.5, 0.5), up, 0.25, 0.5), 0);
+  EXPECT_EQ(grid.nearest(Eigen::Vector3d(0.5, 0.5, 0.5), up, 0.25, 0.5), 1);
+  EXPECT_EQ(grid.nearest(Eigen::Vector3d(0.26, 0.5, 0.5), up, 0.25, 0.5), 1);  // no tie
+}
+
 TEST(Icp, AFlatModelKilometresWideNeedsNoHugeGrid) {
   // A 2 km x 2 km sheet at 8 mm pairs would be 6e10 cells: the cells grow instead.
   const PointCloud sheet = patch(0.0, 0.0, 0.0, 1000.0, 50.0, Eigen::Vector3d::UnitZ());
@@ -309,8 +370,8 @@ TEST(BoundedGrid, KeepsTheSceneInReachOfTheModel) {
   for (Eigen::Index i = 0; i < scene.rows(); ++i) {
     bool inside = true;
     for (int a = 0; a < 3; ++a) {
-      inside = inside && scene(i, a) >= model.min()[a] - reach &&
-               scene(i, a) <= model.max()[a] + reach;
+      inside =
+          inside && scene(i, a) >= model.min()[a] - reach && scene(i, a) <= model.max()[a] + reach;
     }
     if (!inside) continue;
     ASSERT_LT(expected, kept.rows());

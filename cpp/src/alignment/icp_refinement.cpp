@@ -40,14 +40,32 @@ IcpScene::IcpScene(const PointCloud& scene, const Eigen::AlignedBox3d& around, d
   normals_ = rows_of(scene.normals(), rows_);
 }
 
+inline void IcpScene::closest_in(std::int64_t cell, const Eigen::Vector3d& p,
+                                 const Eigen::Vector3d& n, double min_cosine, bool own_cell,
+                                 Nearest& nearest) const {
+  for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
+    const double squared = (points_.row(Eigen::Index(k)).transpose() - p).squaredNorm();
+    if (nearest.beaten_by(squared) && normals_.row(Eigen::Index(k)).dot(n) >= min_cosine) {
+      nearest.squared = squared;
+      nearest.row = rows_[k];
+      nearest.in_own_cell = own_cell;
+    }
+  }
+}
+
 Eigen::Index IcpScene::nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& n,
                                double max_distance, double min_cosine) const {
-  Eigen::Index best = -1;
-  double best_squared = max_distance * max_distance;
+  Nearest nearest;
+  nearest.squared = max_distance * max_distance;
   const Eigen::Array3i c = cell_of(p);
+  // Its own cell first: a pair found there prunes most of the 26 around it.
+  const bool inside = (c >= 0).all() && (c < dims_).all();
+  if (inside) closest_in(linear(c), p, n, min_cosine, true, nearest);
   // Per axis, the squared distance from p to the cells below, at and above its own (0 at
-  // its own): a cell farther than the best pair so far cannot hold a nearer point. Most
-  // of the 26 neighbours are skipped so once a close pair is found.
+  // its own): a cell farther than the best pair so far cannot hold a nearer point, nor
+  // can a row or a slab of cells farther than it. In the cells before the own one (in
+  // the order of the loops) a point as near as one found there replaces it: of equally
+  // near points the first in that order is taken, as when the own cell came in its turn.
   Eigen::Array<double, 3, 3> gap;  // gap(axis, d + 1)
   for (int axis = 0; axis < 3; ++axis) {
     const double low = origin_[axis] + double(c[axis]) * cell_;
@@ -56,23 +74,45 @@ Eigen::Index IcpScene::nearest(const Eigen::Vector3d& p, const Eigen::Vector3d& 
     gap(axis, 2) = std::max(0.0, low + cell_ - p[axis]);
     for (int d = 0; d < 3; ++d) gap(axis, d) *= gap(axis, d);
   }
-  for (int dx = -1; dx <= 1; ++dx)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dz = -1; dz <= 1; ++dz) {
-        const Eigen::Array3i neighbour = c + Eigen::Array3i(dx, dy, dz);
-        if ((neighbour < 0).any() || (neighbour >= dims_).any()) continue;
-        if (gap(0, dx + 1) + gap(1, dy + 1) + gap(2, dz + 1) >= best_squared) continue;
-        const std::int64_t cell = linear(neighbour);
-        for (std::size_t k = start_[std::size_t(cell)]; k < start_[std::size_t(cell) + 1]; ++k) {
-          const double squared = (points_.row(Eigen::Index(k)).transpose() - p).squaredNorm();
-          if (squared < best_squared && normals_.row(Eigen::Index(k)).dot(n) >= min_cosine) {
-            best_squared = squared;
-            best = rows_[k];
-          }
-        }
+  const Eigen::Array3i first = (c - 1).max(0), last = (c + 1).min(dims_ - 1);
+  for (int x = first.x(); x <= last.x(); ++x) {
+    const double gap_x = gap(0, x - c.x() + 1);
+    nearest.before_own_cell = inside && x <= c.x();  // the slab of the own cell: in part
+    if (!nearest.beaten_by(gap_x)) continue;
+    for (int y = first.y(); y <= last.y(); ++y) {
+      const double gap_xy = gap_x + gap(1, y - c.y() + 1);
+      nearest.before_own_cell = inside && (x < c.x() || (x == c.x() && y <= c.y()));
+      if (!nearest.beaten_by(gap_xy)) continue;
+      const std::int64_t row = (std::int64_t(x) * dims_.y() + y) * dims_.z();
+      for (int z = first.z(); z <= last.z(); ++z) {
+        const bool own_row = inside && x == c.x() && y == c.y();
+        if (own_row && z == c.z()) continue;  // searched first
+        nearest.before_own_cell =
+            inside && (x < c.x() || (x == c.x() && (y < c.y() || (own_row && z < c.z()))));
+        if (!nearest.beaten_by(gap_xy + gap(2, z - c.z() + 1))) continue;
+        closest_in(row + z, p, n, min_cosine, false, nearest);
       }
-  return best;
+    }
+  }
+  return nearest.row;
 }
+
+namespace {
+
+// About one model row in `share` = rows / max_points: a couple of thousand pairs pin six
+// degrees of freedom. Chosen by a multiplicative hash of the index, not every k-th row,
+// which would alias with a cloud stored in a regular order (alternating parts, scan rows).
+std::vector<Eigen::Index> sampled_rows(Eigen::Index rows, Eigen::Index max_points) {
+  const std::uint64_t share = std::uint64_t(std::max<Eigen::Index>(1, rows / max_points));
+  std::vector<Eigen::Index> sampled;
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    if (share == 1 || ((std::uint64_t(i) * 0x9E3779B97F4A7C15ull) >> 40) % share == 0)
+      sampled.push_back(i);
+  }
+  return sampled;
+}
+
+}  // namespace
 
 IcpOutcome refine_point_to_plane(const PointCloud& model, const PointCloud& scene,
                                  const Transform& T_scene_model, const IcpSettings& settings) {
@@ -95,26 +135,24 @@ IcpOutcome refine_point_to_plane(const PointCloud& model, const IcpScene& grid,
   outcome.T_scene_model = T_scene_model;
   Eigen::Matrix3d R = T_scene_model.topLeftCorner<3, 3>();
   Eigen::Vector3d t = T_scene_model.topRightCorner<3, 1>();
-  // About one model point in `share`: a couple of thousand pairs pin six degrees of
-  // freedom. Chosen by a multiplicative hash of the index, not every k-th point, which
-  // would alias with a cloud stored in a regular order (alternating parts, scan rows).
-  const std::uint64_t share =
-      std::uint64_t(std::max<Eigen::Index>(1, model.points().rows() / settings.max_points));
-  const auto takes_part = [share](Eigen::Index i) {
-    return share == 1 || ((std::uint64_t(i) * 0x9E3779B97F4A7C15ull) >> 40) % share == 0;
+  const std::vector<Eigen::Index> sampled =
+      sampled_rows(model.points().rows(), settings.max_points);
+  struct Pair {
+    Eigen::Index scene_row;
+    Eigen::Vector3d moved;  // the model point at the step's pose
   };
-
+  std::vector<Pair> pairs;
+  pairs.reserve(sampled.size());
   for (int iteration = 0; iteration < settings.max_iterations; ++iteration) {
-    std::vector<std::pair<Eigen::Index, Eigen::Index>> pairs;  // (model row, scene row)
+    pairs.clear();
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-    for (Eigen::Index i = 0; i < model.points().rows(); ++i) {
-      if (!takes_part(i)) continue;
+    for (const Eigen::Index i : sampled) {
       const Eigen::Vector3d p = R * model.points().row(i).transpose() + t;
       const Eigen::Vector3d n = R * model.normals().row(i).transpose();
       if (settings.viewpoint && n.dot(*settings.viewpoint - p) <= 0.0) continue;
       const Eigen::Index j = grid.nearest(p, n, settings.max_distance, settings.min_cosine);
       if (j < 0) continue;
-      pairs.emplace_back(i, j);
+      pairs.push_back({j, p});
       centroid += p;
     }
     outcome.pairs = static_cast<int>(pairs.size());
@@ -124,10 +162,10 @@ IcpOutcome refine_point_to_plane(const PointCloud& model, const IcpScene& grid,
     // translation u: r + ((p - c) x n_q) . w + n_q . u.
     Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
     Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
-    for (const auto& [i, j] : pairs) {
-      const Eigen::Vector3d p = R * model.points().row(i).transpose() + t;
-      const Eigen::Vector3d q = scene.points().row(j).transpose();
-      const Eigen::Vector3d nq = scene.normals().row(j).transpose();
+    for (const Pair& pair : pairs) {
+      const Eigen::Vector3d& p = pair.moved;
+      const Eigen::Vector3d q = scene.points().row(pair.scene_row).transpose();
+      const Eigen::Vector3d nq = scene.normals().row(pair.scene_row).transpose();
       Eigen::Matrix<double, 6, 1> J;
       J << (p - centroid).cross(nq), nq;
       const double r = (p - q).dot(nq);

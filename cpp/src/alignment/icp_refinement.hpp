@@ -52,6 +52,20 @@ class IcpScene {
   std::int64_t linear(const Eigen::Array3i& c) const {
     return (std::int64_t(c.x()) * dims_.y() + c.y()) * dims_.z() + c.z();
   }
+  // The nearest point of a query so far (IcpScene::nearest searches the query's own
+  // cell first, then the others in order).
+  struct Nearest {
+    double squared = 0.0;          // its squared distance; the largest allowed before one is found
+    Eigen::Index row = -1;         // its row in the scene, -1: none yet
+    bool in_own_cell = false;      // found in the query's own cell
+    bool before_own_cell = false;  // searching a cell before the own one in that order
+    bool beaten_by(double d) const {
+      return d < squared || (before_own_cell && in_own_cell && d == squared);
+    }
+  };
+  // Takes each point of `cell` nearer to p than `nearest` whose normal agrees.
+  void closest_in(std::int64_t cell, const Eigen::Vector3d& p, const Eigen::Vector3d& n,
+                  double min_cosine, bool own_cell, Nearest& nearest) const;
 
   const PointCloud& scene_;
   double cell_ = 0.0;
