@@ -111,7 +111,9 @@ def run_method(method: str, pair: data.ViewPair, arrays: dict, voxel: float, see
             "converged": bool(result.converged),
             "score": float(support.score),
             "fitness": float(support.fitness),
-            "overlap": float(support.overlap),
+            # The support's overlap (its share of checked points on a facing surface), not
+            # the pair's: "overlap" is the pair's (the windows' shared share).
+            "support_overlap": float(support.overlap),
             "voxel": float(result.scale.voxel_size),
         }
     else:
@@ -267,7 +269,9 @@ def merged(before: dict, new: dict) -> dict:
         provenance[method] = {k: new[k] for k in fields}
     records = kept + new["records"]
     order = {family: i for i, family in enumerate(FAMILIES)}
-    records.sort(key=lambda r: (order.get(r["family"], len(order)), r["pair"]))
+    records.sort(
+        key=lambda r: (order.get(r["family"], len(order)), METHODS.index(r["method"]), r["pair"])
+    )
     return new | {
         "records": records,
         "summary": summarize(records),
