@@ -213,6 +213,24 @@ def test_an_occluder_is_dropped_and_ridden_or_held(scene, desired):
     assert fresh.step_record(with_occluder(view(scene, pose), hand))[2].occluded_points == 0
 
 
+def test_near_points_that_hide_none_of_the_reference_are_no_occluder(scene, desired):
+    """Points nearer than the reference could be but on none of its rays (a plate 0.2 m
+    away, off to the side) are dropped, and they are no occluder: a jump beyond the
+    watchdog's bound beside them stops the servo ("jump"), as it does without them, where
+    an occluder would hold it ("occluded", a frame the occluder may have spoiled)."""
+    params = ServoParams(jump_limit_translation=0.05)
+    pose = camera_pose((0.03, -0.02, 0.01), (1.0, -1.0, 2.0))
+    servo = SpectralServo(view(scene, desired), params)
+    assert servo.step_record(view(scene, pose), np.eye(4), now=0.0)[2].fitness > 0.9
+    side = plate(0.2, 0.05, spacing=0.002) + np.array([0.3, 0.0, 0.0])  # rays at x/z 1.25-1.75
+    moved = camera_pose((0.13, -0.02, 0.01), (1.0, -1.0, 2.0))  # 100 mm on, not measured
+    _, status, record = servo.step_record(
+        with_occluder(view(scene, moved), side), np.eye(4), now=0.1
+    )
+    assert record.occluded_points == len(side) and record.hidden_share == 0.0
+    assert status.reason == "jump" and record.hold == "", status
+
+
 def test_run_servo_passes_the_capture_stamp_on(scene, desired):
     """A driver whose stamp stops advancing after the third capture: the loop holds from
     then on and stops after max_outage."""

@@ -50,7 +50,8 @@ class SensorFaults(ControllerState):
         self, cloud: PointCloud, record: ServoRecord, motion: np.ndarray
     ) -> tuple[PointCloud, bool, float, str | None]:
         """A hand in front of the camera: ``cloud`` without the surfaces nearer than the
-        reference could be, whether they are an occluder (``occlusion_min_share``), the
+        reference could be, whether they are an occluder (``occlusion_min_share`` of the
+        points, hiding that share of the reference at least), the
         share of the reference they hide, and a message when too few points remain (the
         step holds). Runs once locked on; fills ``record.occluded_points`` and
         ``record.hidden_share``."""
@@ -76,7 +77,10 @@ class SensorFaults(ControllerState):
             np.asarray(cloud.points)[keep],
             None if normals is None else np.asarray(normals)[keep],
         )
-        occluded = record.occluded_points >= p.faults.occlusion_min_share * points
+        # Near surfaces on none of the reference's rays (a far-off estimate sees the near
+        # table as nearer than the reference) hide nothing to register: dropped, no hold.
+        share = p.faults.occlusion_min_share
+        occluded = record.occluded_points >= share * points and hidden >= share
         if len(cloud) < p.faults.min_points:
             message = (
                 f"{len(cloud)} points remain without {record.occluded_points} "

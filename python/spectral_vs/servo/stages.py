@@ -313,7 +313,11 @@ class FaultParams:
         than the objects' tops. ``inf`` turns the test off.
     occlusion_min_share : float
         An occluder is present when at least this share of the current cloud's points are
-        dropped as occluders, in [0, 1]. While one is present the step holds
+        dropped as occluders and they hide at least this share of the reference, in [0,
+        1]: near surfaces on none of the reference's rays are dropped and ridden (a camera
+        far from the goal sees the near table nearer than the reference's nearest point;
+        holding for them held iiwa extreme start 2 of seed 0 until the outage stopped it).
+        While one is present the step holds
         (``"occluded"``) if fewer than ``min_points`` points remain, if the estimate would
         trip the watchdog, or if its fitness over the reference's visible part (fitness /
         (1 - hidden share)) is below ``watchdog_fitness``; otherwise the servo moves on the
