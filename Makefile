@@ -19,7 +19,7 @@ PIP_BUILD := "scikit-build-core>=0.10" "pybind11>=3" cmake ninja
 PIP_RUNTIME := "numpy>=1.24" "pytest>=8" "hypothesis>=6" "pybullet>=3.2" "matplotlib>=3.7" ruff mypy
 PIP_BENCH := "open3d>=0.19" "small_gicp>=1.0" "kiss-matcher>=1.0"  # the `bench` extra of pyproject.toml
 
-.PHONY: all demo test test-cpp test-python test-sanitize test-tsan fuzz install system-deps venv bench bench-peers bench-servo-peers bench-views experiments \
+.PHONY: all demo test test-cpp test-python test-sanitize test-tsan fuzz install system-deps venv bench bench-peers bench-servo-peers bench-servo-sets bench-views experiments \
 	format lint clean
 
 all: install
@@ -112,6 +112,11 @@ bench-peers: install
 bench-servo-peers: install
 	$(PY) -m pip install -q $(PIP_BENCH)
 	$(PY) benchmarks/servo_peers.py --starts 10
+
+# The servo's eight start sets of docs/servoing.md (20 starts each, one thread; about 15
+# minutes on 2 cores): benchmarks/results/servo_sets/ and the table there.
+bench-servo-sets: install
+	$(PY) benchmarks/servo_sets.py
 
 # Scene-to-scene registration on view pairs of the real scans and of the simulation: ours
 # (when the library has `align_views`) against Open3D ICP, FPFH + RANSAC + ICP and
