@@ -16,6 +16,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 BENCHMARKS_DOC = ROOT / "docs" / "benchmarks.md"
+#: Issue 14's targets for the servo step (everything the controller does with a capture,
+#: 320 x 240, one core), CPU ms: the median and the 95th percentile.
+SERVO_STEP_TARGETS_MS = (5.0, 15.0)
 
 
 def cpu_model(default: str = "unknown CPU") -> str:

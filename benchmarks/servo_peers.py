@@ -82,8 +82,6 @@ DT = 0.1  # control period, s (servo-sim's default)
 MAX_STEPS = 150  # servo-sim's default
 SUCCESS_MM = 5.0
 SUCCESS_DEG = 1.0
-#: The issue's servo step targets, CPU ms: median and 95th percentile.
-STEP_TARGETS_MS = (5.0, 15.0)
 SPECTRAL = "spectral"
 
 
@@ -651,7 +649,8 @@ def plot_step_times(runs: dict[tuple[str, str, str], dict], path: Path) -> None:
                 linewidth=width,
                 label=f"{label}, {robot}: {median:.1f} / {p95:.1f} ms",
             )
-        for value, text in zip(STEP_TARGETS_MS, ("median target", "p95 target"), strict=True):
+        targets = report_lib.SERVO_STEP_TARGETS_MS
+        for value, text in zip(targets, ("median target", "p95 target"), strict=True):
             axis.axvline(value, color="tab:red", linestyle=":", linewidth=1.2)
             axis.text(value * 1.05, 3, text, color="tab:red", rotation=90, fontsize="small")
         axis.axhline(50, color="0.7", linewidth=0.8)
