@@ -85,6 +85,46 @@ def test_relocalization_settings_are_checked():
         ServoParams(relocalize_retry=0)
 
 
+def test_arrival_check_settings_are_checked():
+    with pytest.raises(ValueError, match="refute_fitness must be in"):
+        ServoParams(refute_fitness=1.2)
+    with pytest.raises(ValueError, match="refute_rotation must be > 0"):
+        ServoParams(refute_rotation=0.0)
+    with pytest.raises(ValueError, match="refute_steps must be >= 1"):
+        ServoParams(refute_steps=0)
+    with pytest.raises(ValueError, match="refute_translation must be finite"):
+        ServoParams(refute_translation=float("inf"))
+
+
+def test_a_wrong_pose_reached_is_refuted_and_the_servo_relocalizes():
+    """Start 16 of the Panda's extreme set, seed 0 (465 mm, 35 degrees): the first global
+    registration takes a wrong pose 100 degrees off that the tracking follows with a fitness
+    near 0.8 all the way to it. The arrival check refutes it there, and the next global
+    registrations bring the camera back to the goal."""
+    params = sim.SimParams(mode="kinematic", robot=sim.robot_model("panda"))
+    with sim.PyBulletRobot(params) as robot:
+        reference = robot.capture()
+        T_world_reference = robot.camera_pose()
+        check = robot.view_check(0.3)
+        home = params.robot.home_q
+        q, _, _ = start_poses(robot.kinematics, "extreme", 17, 0, home, accept=check)[16]
+        robot.reset_joint_positions(q)
+        servo = SpectralServo(reference)
+        log = run_servo(robot, robot.kinematics, servo, dt=0.1, max_steps=150)
+        final_mm, final_deg = errors_mm_deg(robot.camera_pose(), T_world_reference)
+    refuted = [record for record in log.records if record.refuted]
+    assert len(refuted) == 1
+    wrong = refuted[0]
+    # Refuted near where it led (its estimate within the zone, its fit under 0.9) while
+    # the camera stood far from the goal.
+    assert 1000 * wrong.translation_error <= 1000 * servo.params.refute_translation
+    assert wrong.fitness < 0.9
+    wrong_mm, wrong_deg = errors_mm_deg(np.asarray(wrong.T_base_camera), T_world_reference)
+    assert wrong_mm > 150.0 or wrong_deg > 30.0
+    assert log.converged, log.status
+    assert final_mm < 1.0 and final_deg < 0.5
+
+
 def test_field_share_counts_what_lies_in_the_views_field():
     # The current view: a plane at z = 1 m filling x, y in [-0.5, 0.5] (x/z, y/z within
     # +-0.5). The reference: points at z = 1 m, x in [-1, 1]: half of them inside.

@@ -41,6 +41,7 @@ def test_derived_lengths_follow_the_scene():
     assert small.jump_limit_translation == pytest.approx(0.0697, abs=0.001)
     assert small.occlusion_margin == pytest.approx(0.0349, abs=0.0005)
     assert small.recover_standoff == pytest.approx(0.105, abs=0.002)
+    assert small.refute_translation == pytest.approx(0.0209, abs=0.0003)
 
 
 def test_the_servo_uses_the_lengths_it_resolved():
@@ -64,6 +65,7 @@ def test_explicit_lengths_are_kept():
         "jump_limit_translation": 0.07,
         "occlusion_margin": math.inf,
         "recover_standoff": 0.1,
+        "refute_translation": 0.02,
     }
     servo = SpectralServo(scaled_reference(1.0), ServoParams(**explicit))
     for name, value in explicit.items():

@@ -118,6 +118,8 @@ class SpectralServo(SensorFaults, Relocalization):
         self._confirmed = False
         self._unconfirmed = 0
         self._reset_recovery()
+        self._refuted = []
+        self._poor_arrivals = 0
         self._settled = False
         self._outside = 0
         self._reset_faults()
@@ -398,6 +400,7 @@ class SpectralServo(SensorFaults, Relocalization):
             record.status = _converged_status(record.translation_error, record.rotation_error)
         else:
             record.twist, record.saturation = self.twist(T)
+            self._check_arrival(T, record)
 
     def _can_track(self, guess: np.ndarray | None, motion: np.ndarray | None) -> bool:
         """Whether this registration may seek only ``tracking_translation``: locked on (the

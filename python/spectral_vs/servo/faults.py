@@ -93,6 +93,7 @@ class SensorFaults(ControllerState):
         """Forget what the fault tests remember: the camera's motion since the last accepted
         step, the last frame's fingerprint and stamp, and the outage's start."""
         self._motion = np.eye(4)  # T_accepted_current: since the last accepted step
+        self._odometry = np.eye(4)  # T_first_current: since the first step
         self._frame_key: bytes | None = None  # fingerprint of the last non-empty frame
         self._frame_motion = np.eye(4)  # the camera's motion since that frame came first
         self._last_stamp: float | None = None
@@ -100,11 +101,12 @@ class SensorFaults(ControllerState):
 
     def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:
         """Add the camera's motion since the previous step (identity when not given) to the
-        motion since the last accepted step and since the last frame came first; return
-        the former (``T_accepted_current``)."""
+        motion since the last accepted step, since the first step and since the last frame
+        came first; return the first (``T_accepted_current``)."""
         if T_previous_current is not None:
             step = np.asarray(T_previous_current, dtype=float)
             self._motion = self._motion @ step
+            self._odometry = self._odometry @ step
             self._frame_motion = self._frame_motion @ step
         return self._motion
 

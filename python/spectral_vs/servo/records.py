@@ -148,6 +148,9 @@ class ServoRecord:
         ``T_current_desired`` and the errors are then those of the recovery's target pose,
         no registration ran (``fitness`` and ``confidence`` NaN), and the step never
         converges.
+    refuted : bool
+        The arrival check refuted the estimate at this step (``ServoParams.refute_fitness``):
+        it reached the goal with a poor fitness; the next step relocalizes away from it.
     """
 
     step: int
@@ -182,6 +185,7 @@ class ServoRecord:
     confidence: float = math.nan
     carried: bool = False
     recovery: str = ""
+    refuted: bool = False
     cpu_seconds: float = 0.0
 
 

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from spectral_vs._core import PointCloud
+from spectral_vs._core import PointCloud, ViewAlignResult
 from spectral_vs._core import align_views as _align_views
 from spectral_vs.poses import pose_error
 from spectral_vs.servo.law import _rigid_inverse
@@ -114,7 +114,8 @@ class Relocalization(ControllerState):
         self._confirmed = False
         self._unconfirmed += 1  # until the step confirms it
         result = _align_views(self._reference_view, cloud, self._view_params, prior)
-        record.relocalization_score = float(result.support.score)
+        T, score = self._untried(result)
+        record.relocalization_score = score
         record.relocalization_prior = prior is not None and result.hypothesis == -1
         # While recovering the view widens step by step: a marginal score in the middle
         # of it is worth waiting out (a 17-degree wrong pose scored 0.061 there).
@@ -123,15 +124,70 @@ class Relocalization(ControllerState):
             if self._recovering()
             else self.params.relocalization.relocalize_score
         )
-        if result.support.score < least:
+        if score < least:
             self._failed_relocalizations += 1
             return
         self._reset_recovery()
         record.relocalized = True
-        self._previous = np.asarray(result.T_current_reference)
+        self._previous = T
         self._motion = np.eye(4)
         self._anchored = True
         self._lost = False
+
+    def _untried(self, result: ViewAlignResult) -> tuple[np.ndarray, float]:
+        """The best-supported pose of ``result`` (``T_current_reference``) that is not near
+        an estimate the arrival check refuted, and its support score (0 when every pose is:
+        none is taken)."""
+        T = np.asarray(result.T_current_reference)
+        if not self._refuted:
+            return T, float(result.support.score)
+        searched = sorted(
+            ((np.asarray(pose), float(support.score)) for pose, support in result.hypotheses),
+            key=lambda candidate: -candidate[1],
+        )
+        candidates = [(T, float(result.support.score)), *searched]
+        for pose, score in candidates:
+            if not self._near_refuted(pose):
+                return pose, score
+        return T, 0.0
+
+    def _near_refuted(self, T_current_desired: np.ndarray) -> bool:
+        """Whether ``T_current_desired`` puts the goal within the watchdog's jump limits of
+        a refuted estimate's (both placed by the camera's measured motion)."""
+        T_first_desired = self._odometry @ T_current_desired
+        limits = self.params.watchdog
+        for refuted in self._refuted:
+            moved, turned = pose_error(_rigid_inverse(refuted) @ T_first_desired)
+            if moved <= limits.jump_limit_translation and turned <= limits.jump_limit_rotation:
+                return True
+        return False
+
+    def _check_arrival(self, T: np.ndarray, record: ServoRecord) -> None:
+        """The arrival check (``ServoParams.refute_fitness``): an estimate ``T`` near the goal
+        whose fitness stays under ``refute_fitness`` for ``refute_steps`` steps is refuted:
+        remembered, forgotten as the estimate, and the next step relocalizes."""
+        p = self.params
+        if not p.relocalization.relocalize:
+            return
+        at_goal = (
+            record.translation_error <= p.relocalization.refute_translation
+            and record.rotation_error <= p.relocalization.refute_rotation
+        )
+        poor = at_goal and record.fitness < p.relocalization.refute_fitness
+        self._poor_arrivals = self._poor_arrivals + 1 if poor else 0
+        if self._poor_arrivals < p.relocalization.refute_steps:
+            return
+        record.refuted = True
+        self._refuted.append(self._odometry @ T)
+        self._poor_arrivals = 0
+        self._previous = None
+        self._armed = False
+        self._anchored = False
+        self._lost = True
+        self._since_relocalization = None
+        self._confirmed = False
+        self._unconfirmed = 0
+        self._reset_recovery()
 
     def _recovering(self) -> bool:
         """Whether this step recovers (``ServoParams.recover_after``): no global registration

@@ -1,6 +1,7 @@
 """The servo's scale lengths, derived from the reference view when they are not given
 (0): the voxel, the downsampling, the translation bounds of the registration, the depth
-crop, the watchdog's jump, the occluder margin and the recovery's standoff. One rule, in
+crop, the watchdog's jump, the occluder margin, the recovery's standoff and the arrival
+check's zone. One rule, in
 units of the reference's extent (:func:`spectral_vs.view_scale`'s: twice the median
 distance of its points from their per-axis median); docs/servoing.md states it and the
 values it gives on the simulated table. Accuracy targets (the stop rule's tolerances, the
@@ -26,13 +27,14 @@ VOXELS_ACROSS = 37.0
 #: cropped, and a view turned toward the horizon loses the far floor and walls.
 DEPTH_BEYOND_REFERENCE = 1.7
 #: The other derived lengths, in extents (on the simulated table, 0.556 m: 0.300, 0.100,
-#: 0.100, 0.050 and 0.150 m, the absolute defaults the servo was measured with).
+#: 0.100, 0.050, 0.150 and 0.030 m, the absolute defaults the servo was measured with).
 SHARE_OF_EXTENT: dict[str, float] = {
     "max_translation": 0.54,
     "tracking_translation": 0.18,
     "jump_limit_translation": 0.18,
     "occlusion_margin": 0.09,
     "recover_standoff": 0.27,
+    "refute_translation": 0.054,
 }
 #: Every scale length of :class:`ServoParams`, with its group.
 SCALE_LENGTHS: dict[str, str] = {
@@ -44,6 +46,7 @@ SCALE_LENGTHS: dict[str, str] = {
     "jump_limit_translation": "watchdog",
     "occlusion_margin": "faults",
     "recover_standoff": "recovery",
+    "refute_translation": "relocalization",
 }
 
 
@@ -63,6 +66,8 @@ class ServoScale:
         The lengths the servo uses, m (given or derived; :class:`ServoParams`).
     max_depth, jump_limit_translation, occlusion_margin, recover_standoff : float
         The same.
+    refute_translation : float
+        The same.
     derived : tuple of str
         The names of the lengths that were derived (given as 0).
     """
@@ -77,6 +82,7 @@ class ServoScale:
     jump_limit_translation: float
     occlusion_margin: float
     recover_standoff: float
+    refute_translation: float
     derived: tuple[str, ...]
 
 

@@ -386,6 +386,24 @@ class RelocalizationParams:
     view_overrides : dict
         :class:`spectral_vs.ViewAlignParams` fields of the relocalization, e.g.
         ``{"hypotheses": 24}`` (by default every length is derived from the views).
+    refute_fitness : float
+        The arrival check, in [0, 1]: near the goal the reference is in view again, so an
+        estimate within ``refute_translation`` and ``refute_rotation`` of it whose fitness
+        stays under this for ``refute_steps`` steps in a row is a wrong pose that tracked
+        well, not the goal. The servo then forgets it, relocalizes, and never takes a
+        global registration near it again (within the watchdog's ``jump_limit_*``, placed
+        by the camera's measured motion). The same value as ``watchdog_fitness``: an
+        estimate that the registration does not lock on even at the goal. Right estimates
+        in that zone fitted at least 0.988 on the tuning starts; the wrong poses that the
+        servo drove to and held, 0.81 (docs/servoing.md, "Arrival check"). 0 turns the
+        check off.
+    refute_translation : float
+        The arrival check's zone about the goal, m; 0 (default): 0.054 extents of the
+        reference (30 mm on the simulated table) ...
+    refute_rotation : float
+        ... and rad.
+    refute_steps : int
+        Steps in a row in the zone under ``refute_fitness`` that refute the estimate, >= 1.
     """
 
     relocalize: bool = True
@@ -395,9 +413,16 @@ class RelocalizationParams:
     relocalize_backoff: int = 2
     relocalize_score: float = 0.05
     view_overrides: dict[str, Any] = field(default_factory=dict)
+    refute_fitness: float = 0.9
+    refute_translation: float = 0.0
+    refute_rotation: float = math.radians(3.0)
+    refute_steps: int = 5
 
     def __post_init__(self) -> None:
-        _check_share(self, ("relocalize_fitness", "relocalize_score"))
+        _check_share(self, ("relocalize_fitness", "relocalize_score", "refute_fitness"))
+        _check_lengths(self, ("refute_translation",))
+        _check_positive(self, ("refute_rotation",))
+        _check_at_least(self, "refute_steps", 1, "step")
         _check_at_least(self, "relocalize_interval", 1, "step")
         if not 1 <= self.relocalize_retry <= self.relocalize_interval:
             raise ValueError(

@@ -46,6 +46,9 @@ class ControllerState:
     _settled: bool  #: converged and not re-engaged since (the hysteresis)
     _outside: int  #: settled steps in a row whose estimate left the re-engage bounds
     _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
+    _odometry: np.ndarray  #: T_first_current: the camera's motion since the first step
+    _refuted: list[np.ndarray]  #: T_first_desired of the estimates the arrival check refuted
+    _poor_arrivals: int  #: steps in a row at the goal under refute_fitness
     _frame_key: bytes | None  #: fingerprint of the last non-empty frame
     _frame_motion: np.ndarray  #: the camera's motion since that frame came first
     _last_stamp: float | None
