@@ -110,7 +110,9 @@ def test_a_wrong_pose_reached_is_refuted_and_the_servo_relocalizes():
         q, _, _ = start_poses(robot.kinematics, "extreme", 17, 0, home, accept=check)[16]
         robot.reset_joint_positions(q)
         servo = SpectralServo(reference)
-        log = run_servo(robot, robot.kinematics, servo, dt=0.1, max_steps=150)
+        log = run_servo(
+            robot, robot.kinematics, servo, dt=0.1, max_steps=150, stop_at_joint_limit=False
+        )
         final_mm, final_deg = errors_mm_deg(robot.camera_pose(), T_world_reference)
     refuted = [record for record in log.records if record.refuted]
     assert len(refuted) == 1
@@ -121,6 +123,40 @@ def test_a_wrong_pose_reached_is_refuted_and_the_servo_relocalizes():
     assert wrong.fitness < 0.9
     wrong_mm, wrong_deg = errors_mm_deg(np.asarray(wrong.T_base_camera), T_world_reference)
     assert wrong_mm > 150.0 or wrong_deg > 30.0
+    assert log.converged, log.status
+    assert final_mm < 1.0 and final_deg < 0.5
+
+
+def test_only_a_confirmed_estimate_is_the_relocalizations_prior():
+    """Start 12 of the iiwa's extreme set, seed 0 (545 mm, 31 degrees): its first global
+    registrations take poses 140-180 degrees off, never confirmed (the table scene is
+    nearly symmetric under a half turn). Kept as the prior, such a pose was refined and
+    taken again at every relocalization and the run ended 323 mm and 95 degrees off; as no
+    prior, the searches stay free and one finds the goal."""
+    params = sim.SimParams(mode="kinematic")
+    with sim.PyBulletRobot(params) as robot:
+        reference = robot.capture()
+        T_world_reference = robot.camera_pose()
+        check = robot.view_check(0.3)
+        home = params.robot.home_q
+        q, _, _ = start_poses(robot.kinematics, "extreme", 13, 0, home, accept=check)[12]
+        robot.reset_joint_positions(q)
+        servo = SpectralServo(reference)
+        log = run_servo(
+            robot, robot.kinematics, servo, dt=0.1, max_steps=200, stop_at_joint_limit=False
+        )
+        final_mm, final_deg = errors_mm_deg(robot.camera_pose(), T_world_reference)
+    trusted = False  # the last relocalization was taken and confirmed
+    tries = 0
+    for record in log.records:
+        if np.isnan(record.relocalization_score):
+            trusted = trusted and not record.refuted
+            continue
+        tries += 1
+        assert trusted or not record.relocalization_prior, record.step
+        confidence = servo.params.relocalize_fitness
+        trusted = record.relocalized and record.confidence >= confidence and not record.refuted
+    assert tries >= 3
     assert log.converged, log.status
     assert final_mm < 1.0 and final_deg < 0.5
 

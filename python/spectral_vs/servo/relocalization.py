@@ -109,7 +109,10 @@ class Relocalization(ControllerState):
         previous estimate when its support reaches ``relocalize_score``."""
         # The estimate carried so far, if a global registration was taken before (an
         # estimate of the local step alone far from the goal is no prior worth refining).
-        prior = None if self._previous is None or not self._anchored else self._predicted(motion)
+        # An estimate never confirmed since it was taken is no prior: kept over the search,
+        # a wrong pose that tracked poorly was taken again at every relocalization.
+        trusted = self._anchored and self._confirmed
+        prior = None if self._previous is None or not trusted else self._predicted(motion)
         self._since_relocalization = 0
         self._confirmed = False
         self._unconfirmed += 1  # until the step confirms it

@@ -352,8 +352,10 @@ class RelocalizationParams:
         when the servo has no trusted estimate: at its first step, and after a registration
         whose confidence was below ``relocalize_fitness`` (the view moved far, or the
         estimate slid off), at most every ``relocalize_interval`` steps. The estimate
-        tracked so far goes in as the global search's prior: it is refined beside the
-        search's hypotheses and kept unless a searched pose is better supported. The
+        tracked so far, if its last relocalization was confirmed, goes in as the global
+        search's prior: it is refined beside the search's hypotheses and kept unless a
+        searched pose is better supported (an unconfirmed one would be taken again and
+        again: docs/servoing.md). The
         result, if its support score reaches ``relocalize_score``, becomes the estimate
         the step's cheap registration starts from; from then on every registration starts
         from the last estimate carried along the camera's measured motion (the warm
