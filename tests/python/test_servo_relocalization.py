@@ -85,6 +85,25 @@ def test_relocalization_settings_are_checked():
         ServoParams(relocalize_retry=0)
 
 
+def extreme_run(robot_name: str, index: int, max_steps: int):
+    """Start ``index`` of the extreme set of seed 0 on ``robot_name``, as ``servo-sim`` runs
+    it (kinematic, default servo, carrying on at a joint limit): the log, the servo, the
+    reference pose and the final camera error (mm, degrees)."""
+    params = sim.SimParams(mode="kinematic", robot=sim.robot_model(robot_name))
+    with sim.PyBulletRobot(params) as robot:
+        reference = robot.capture()
+        T_world_reference = robot.camera_pose()
+        check = robot.view_check(0.3)
+        home = params.robot.home_q
+        starts = start_poses(robot.kinematics, "extreme", index + 1, 0, home, accept=check)
+        robot.reset_joint_positions(starts[index][0])
+        servo = SpectralServo(reference)
+        log = run_servo(
+            robot, robot.kinematics, servo, dt=0.1, max_steps=max_steps, stop_at_joint_limit=False
+        )
+        return log, servo, T_world_reference, errors_mm_deg(robot.camera_pose(), T_world_reference)
+
+
 def test_arrival_check_settings_are_checked():
     with pytest.raises(ValueError, match="refute_fitness must be in"):
         ServoParams(refute_fitness=1.2)
@@ -101,19 +120,7 @@ def test_a_wrong_pose_reached_is_refuted_and_the_servo_relocalizes():
     registration takes a wrong pose 100 degrees off that the tracking follows with a fitness
     near 0.8 all the way to it. The arrival check refutes it there, and the next global
     registrations bring the camera back to the goal."""
-    params = sim.SimParams(mode="kinematic", robot=sim.robot_model("panda"))
-    with sim.PyBulletRobot(params) as robot:
-        reference = robot.capture()
-        T_world_reference = robot.camera_pose()
-        check = robot.view_check(0.3)
-        home = params.robot.home_q
-        q, _, _ = start_poses(robot.kinematics, "extreme", 17, 0, home, accept=check)[16]
-        robot.reset_joint_positions(q)
-        servo = SpectralServo(reference)
-        log = run_servo(
-            robot, robot.kinematics, servo, dt=0.1, max_steps=150, stop_at_joint_limit=False
-        )
-        final_mm, final_deg = errors_mm_deg(robot.camera_pose(), T_world_reference)
+    log, servo, T_world_reference, (final_mm, final_deg) = extreme_run("panda", 16, 150)
     refuted = [record for record in log.records if record.refuted]
     assert len(refuted) == 1
     wrong = refuted[0]
@@ -133,19 +140,7 @@ def test_only_a_confirmed_estimate_is_the_relocalizations_prior():
     nearly symmetric under a half turn). Kept as the prior, such a pose was refined and
     taken again at every relocalization and the run ended 323 mm and 95 degrees off; as no
     prior, the searches stay free and one finds the goal."""
-    params = sim.SimParams(mode="kinematic")
-    with sim.PyBulletRobot(params) as robot:
-        reference = robot.capture()
-        T_world_reference = robot.camera_pose()
-        check = robot.view_check(0.3)
-        home = params.robot.home_q
-        q, _, _ = start_poses(robot.kinematics, "extreme", 13, 0, home, accept=check)[12]
-        robot.reset_joint_positions(q)
-        servo = SpectralServo(reference)
-        log = run_servo(
-            robot, robot.kinematics, servo, dt=0.1, max_steps=200, stop_at_joint_limit=False
-        )
-        final_mm, final_deg = errors_mm_deg(robot.camera_pose(), T_world_reference)
+    log, servo, _, (final_mm, final_deg) = extreme_run("iiwa", 12, 200)
     trusted = False  # the last relocalization was taken and confirmed
     tries = 0
     for record in log.records:

@@ -108,16 +108,9 @@ class SpectralServo(SensorFaults, Relocalization):
         """Forget the previous estimate (the watchdog's memory), the step count, whether the
         servo converged (``ServoParams.reengage_translation``) and what the fault tests
         remember (the last frame, the outage's start)."""
-        self._previous = None
-        self._armed = False
+        self._forget_estimate()
         self._steps = 0
         self._last_turn = 0.0
-        self._anchored = False
-        self._lost = True
-        self._since_relocalization = None
-        self._confirmed = False
-        self._unconfirmed = 0
-        self._reset_recovery()
         self._refuted = []
         self._poor_arrivals = 0
         self._settled = False

@@ -183,6 +183,11 @@ class Relocalization(ControllerState):
         record.refuted = True
         self._refuted.append(self._odometry @ T)
         self._poor_arrivals = 0
+        self._forget_estimate()
+
+    def _forget_estimate(self) -> None:
+        """Forget the estimate and everything learnt about it: the watchdog's lock-on, the
+        relocalizations tried and the recovery; the next step relocalizes."""
         self._previous = None
         self._armed = False
         self._anchored = False
