@@ -429,21 +429,39 @@ def test_too_few_points_holds(scene, desired):
 
 
 def test_watchdog_stops_on_a_teleported_cloud(scene, desired):
-    """After 5 steps the cloud is suddenly that of a camera 0.25 m away while the joints say
-    it moved a few millimetres: the estimate jumps and the robot is stopped."""
+    """After 5 steps the cloud is suddenly that of a camera 0.15 m away while the joints say
+    it moved a few millimetres: the jumped pose fits the view (fitness 1), the estimate
+    jumps and the robot is stopped."""
     jump = np.eye(4)
-    jump[:3, 3] = (0.25, 0.0, 0.0)
+    jump[:3, 3] = (0.15, 0.0, 0.0)
     robot = FreeCamera(scene, camera_pose((0.03, -0.02, 0.01)), teleport_at=5, teleport=jump)
     log = run_servo(robot, FreeCameraKinematics(), SpectralServo(view(scene, desired)), dt=0.1)
     assert log.reason == "jump", log.status
     assert len(log.records) == 6 and len(robot.sent) == 5 and robot.stops == 1
+    assert log.records[-1].fitness > 0.9
     assert np.all(log.records[-1].twist == 0)
     assert "mm" in log.status.message
 
 
+def test_a_jump_that_fits_poorly_is_carried_then_relocalized(scene, desired):
+    """Teleported 0.25 m, the view fits the jumped pose poorly (0.65 measured): that
+    estimate is not trusted, the one carried along the joints' motion is, the servo finds
+    itself lost and its global registration takes the view as it now is."""
+    jump = np.eye(4)
+    jump[:3, 3] = (0.25, 0.0, 0.0)
+    robot = FreeCamera(scene, camera_pose((0.03, -0.02, 0.01)), teleport_at=5, teleport=jump)
+    log = run_servo(robot, FreeCameraKinematics(), SpectralServo(view(scene, desired)), dt=0.1)
+    teleported = log.records[5]
+    assert teleported.fitness < 0.9 and teleported.carried
+    assert 1000 * teleported.translation_error < 20.0  # the carried estimate, not the jump
+    relocalized = [record for record in log.records[6:] if record.relocalized]
+    assert relocalized and 1000 * relocalized[0].translation_error > 200.0
+    assert log.converged, log.status
+
+
 def test_tracking_bound_near_the_goal_and_full_search_after_a_jump(scene, desired):
     """Once locked on, near the previous estimate, the registration seeks only
-    tracking_translation; a camera moved 0.25 m behind the kinematics' back gives a poor
+    tracking_translation; a camera moved 0.15 m behind the kinematics' back gives a poor
     bounded fit, the full search redoes the step and the watchdog stops the servo."""
     servo = SpectralServo(view(scene, desired))
     current = camera_pose((0.01, -0.01, 0.005), (0.5, -0.5, 0.5))
@@ -455,7 +473,7 @@ def test_tracking_bound_near_the_goal_and_full_search_after_a_jump(scene, desire
     full = SpectralServo(view(scene, desired)).step_record(view(scene, current))[2]
     assert errors_mm_deg(records[2].T_current_desired, full.T_current_desired)[0] < 1.0
     jump = np.eye(4)
-    jump[:3, 3] = (0.25, 0.0, 0.0)
+    jump[:3, 3] = (0.15, 0.0, 0.0)
     twist, status, record = servo.step_record(view(scene, current @ jump), np.eye(4))
     assert not record.tracking
     assert status.reason == "jump" and not twist.any()

@@ -318,16 +318,13 @@ class SpectralServo(SensorFaults, Relocalization):
         scene, result = self._registration(cloud, record, guess, motion)
         last = result.history[-1] if len(result.history) else None
         record.fitness = float(result.fitness)
-        # Before lock-on the views share too little for Algorithm 1's step: the EGI
-        # correlation of two partial views peaks 10-20 degrees off the truth, and steps
-        # toward it drift away from a right global estimate. The last good estimate carried
-        # along the camera's measured motion is the estimate until the registration locks
-        # on (fitness watchdog_fitness).
+        # Where the registration fits poorly the views share too little for Algorithm 1's
+        # step: the EGI correlation of two partial views peaks 10-20 degrees off the truth,
+        # and far from the goal the phase correlation's shift leaps by tens of mm from step
+        # to step. The last good estimate carried along the camera's measured motion is the
+        # estimate while the fitness is under watchdog_fitness, before lock-on and after.
         record.carried = (
-            self._anchored
-            and not self._armed
-            and guess is not None
-            and record.fitness < p.watchdog.watchdog_fitness
+            self._anchored and guess is not None and record.fitness < p.watchdog.watchdog_fitness
         )
         T = np.asarray(result.T_scene_model)
         # The plane turn is of the estimate the step keeps, and of the confidence's pose

@@ -139,8 +139,9 @@ class ServoRecord:
         NaN when no registration ran.
     carried : bool
         The estimate is the last accepted one carried along the camera's measured motion,
-        not the registration's: after a relocalization and before lock-on (a fitness of
-        ``watchdog_fitness``), where the views share too little for Algorithm 1's step.
+        not the registration's: once a relocalization was taken, at a step whose fitness is
+        under ``watchdog_fitness`` (before lock-on and after), where the views share too
+        little for Algorithm 1's step.
     recovery : str
         ``""``, or how the step moved the camera to widen its overlap with the reference
         (``ServoParams.recover_after``): ``"level"`` (onto the reference's plane, at its
