@@ -30,8 +30,9 @@ import report as report_lib
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "results" / "servo_sets"
 SERVOING_DOC = ROOT / "docs" / "servoing.md"
-#: (robot, set, seed): the iiwa's seed 0 is where the servo's defaults were chosen; its
-#: seed 1 and the Panda are reported beside it.
+#: (robot, set, seed): the iiwa's seed 0, and for the extreme set its seeds 2 and 3 (from
+#: commit caa99d8), are where the servo's defaults were chosen; its seed 1 and the Panda
+#: are reported beside them.
 RUN_LIST = (
     ("iiwa", "moderate", 0),
     ("iiwa", "large", 0),
@@ -41,6 +42,8 @@ RUN_LIST = (
     ("panda", "extreme", 0),
     ("iiwa", "large", 1),
     ("iiwa", "extreme", 1),
+    ("iiwa", "extreme", 2),
+    ("iiwa", "extreme", 3),
 )
 STARTS = 20
 #: CPU ms over which a step is counted as a global registration's.
