@@ -101,6 +101,7 @@ class SpectralServo(SensorFaults, Relocalization):
             np.asarray(self._reference_view.normals),
             self.params.plane.plane_cone,
             self.params.plane.min_plane_share,
+            nearest=True,
         )
         self.reset()
 

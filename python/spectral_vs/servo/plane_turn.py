@@ -55,14 +55,21 @@ def dominant_normal(normals: np.ndarray, cone: float) -> tuple[np.ndarray, float
 
 
 def dominant_plane(
-    points: np.ndarray, normals: np.ndarray, cone: float, min_share: float
+    points: np.ndarray,
+    normals: np.ndarray,
+    cone: float,
+    min_share: float,
+    nearest: bool = False,
 ) -> tuple[np.ndarray, float] | None:
     """The dominant plane of a view (a table top), camera frame: the core's
     :func:`spectral_vs.dominant_plane` with the normals within ``cone`` (rad) of its
     direction, at any distance from it, and its offset voted in 1 mm bins. Its unit normal
     ``n`` (toward the camera, as the view's normals are) and the camera's distance to it,
     ``d`` = -offset, m; None when fewer than ``min_share`` of the normals lie within ``cone``
-    of its direction (:func:`dominant_normal`) or the camera is not in front of it."""
+    of its direction (:func:`dominant_normal`) or the camera is not in front of it.
+    ``nearest``: of the parallel planes holding at least ``min_share`` of the points, the
+    nearest to the camera (a table top rather than the floor beyond it, which a camera
+    risen above the table sees more of)."""
     normals = np.asarray(normals, dtype=float).reshape(-1, 3)
     _, share = dominant_normal(normals, cone)
     if share < min_share or share == 0.0:
@@ -73,8 +80,39 @@ def dominant_plane(
     )
     if plane is None:
         return None
+    normal = np.asarray(plane.normal, dtype=float)
     distance = -float(plane.offset)
-    return (np.asarray(plane.normal, dtype=float), distance) if distance > 0 else None
+    if nearest:
+        distance = _nearest_distance(cloud, normal, cone, min_share, distance)
+    return (normal, distance) if distance > 0 else None
+
+
+#: Bin of the camera's distances to the parallel planes of a view, m (``nearest``): wider
+#: than the depth noise across a table top.
+_PARALLEL_PLANE_BIN = 0.02
+
+
+def _nearest_distance(
+    cloud: PointCloud, normal: np.ndarray, cone: float, min_share: float, dominant: float
+) -> float:
+    """The camera's distance to the nearest plane along ``normal`` holding at least
+    ``min_share`` of the points of ``cloud`` (normals within ``cone``), the median over its
+    bin and the next; ``dominant`` when none does."""
+    points = np.asarray(cloud.points)
+    member = np.asarray(cloud.normals) @ normal > math.cos(cone)
+    distances = -(points[member] @ normal)
+    distances = distances[distances > 0]
+    if len(distances) == 0:
+        return dominant
+    bins = np.floor(distances / _PARALLEL_PLANE_BIN).astype(int)
+    counts = np.bincount(bins)
+    pairs = counts + np.append(counts[1:], 0)  # a plane across a bin edge counts whole
+    enough = np.flatnonzero(pairs >= min_share * len(points))
+    if len(enough) == 0:
+        return dominant
+    first = enough[0]
+    near = distances[(bins == first) | (bins == first + 1)]
+    return float(np.median(near))
 
 
 def _turn_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -264,6 +264,7 @@ class Relocalization(ControllerState):
             np.asarray(source.normals)[::stride],
             p.plane.plane_cone,
             p.plane.min_plane_share,
+            nearest=True,
         )
         if current is None:
             return None
