@@ -88,6 +88,27 @@ def test_dominant_plane_finds_the_table_and_its_distance():
     assert dominant_plane(points[sides], normals[sides], math.radians(20), 0.5) is None
 
 
+def test_the_nearest_parallel_plane_is_the_table_not_the_floor():
+    """A view that sees more floor (1.2 m away, 55% of the points) than table top (0.5 m,
+    45%): the dominant plane is the floor; the nearest plane holding min_share is the table,
+    unless the table holds less than min_share."""
+
+    def plane_points(distance: float, count: int, rng: np.random.Generator) -> np.ndarray:
+        xy = rng.uniform(-0.4, 0.4, (count, 2)) * distance
+        return np.column_stack([xy, np.full(count, distance)])
+
+    rng = np.random.default_rng(5)
+    for table_share, nearest in ((0.45, 0.5), (0.2, 1.2)):
+        table = plane_points(0.5, int(10000 * table_share), rng)
+        floor = plane_points(1.2, 10000 - len(table), rng)
+        points = np.vstack([table, floor])
+        normals = np.tile([0.0, 0.0, -1.0], (len(points), 1))
+        _, dominant = dominant_plane(points, normals, math.radians(20), 0.3)
+        assert dominant == pytest.approx(1.2, abs=0.005)
+        _, chosen = dominant_plane(points, normals, math.radians(20), 0.3, nearest=True)
+        assert chosen == pytest.approx(nearest, abs=0.005), table_share
+
+
 def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
     # The current camera is tilted by 35 degrees about its x axis and 0.2 m nearer the
     # table: no relocalization is taken (relocalize_score and recover_score 1), so from
