@@ -91,7 +91,8 @@ class SensorFaults(ControllerState):
 
     def _reset_faults(self) -> None:
         """Forget what the fault tests remember: the camera's motion since the last accepted
-        step, the last frame's fingerprint and stamp, and the outage's start."""
+        step (and since the first, the arrival check's odometry), the last frame's
+        fingerprint and stamp, and the outage's start."""
         self._motion = np.eye(4)  # T_accepted_current: since the last accepted step
         self._odometry = np.eye(4)  # T_first_current: since the first step
         self._frame_key: bytes | None = None  # fingerprint of the last non-empty frame

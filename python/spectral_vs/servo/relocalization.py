@@ -144,10 +144,8 @@ class Relocalization(ControllerState):
         T = np.asarray(result.T_current_reference)
         if not self._refuted:
             return T, float(result.support.score)
-        searched = sorted(
-            ((np.asarray(pose), float(support.score)) for pose, support in result.hypotheses),
-            key=lambda candidate: -candidate[1],
-        )
+        # The checked hypotheses come best score first (ViewAlignResult.hypotheses).
+        searched = ((np.asarray(pose), float(support.score)) for pose, support in result.hypotheses)
         candidates = [(T, float(result.support.score)), *searched]
         for pose, score in candidates:
             if not self._near_refuted(pose):
