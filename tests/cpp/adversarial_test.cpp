@@ -94,6 +94,8 @@ std::string temp_path(const std::string& name) {
   return (std::filesystem::temp_directory_path() / ("spectral_vs_adversarial_" + name)).string();
 }
 
+constexpr const char* kPlyHead = "ply\nformat ascii 1.0\n";
+
 std::string write_file(const std::string& name, const std::string& bytes) {
   const std::string path = temp_path(name);
   std::ofstream(path, std::ios::binary) << bytes;
@@ -349,10 +351,72 @@ std::vector<Case> cases() {
          const std::string bytes = read_bytes(temp_path("p.ply"));
          load_cloud(write_file("trunc.ply", bytes.substr(0, bytes.size() / 2)));
        },
-       "could not be parsed"},
+       "is truncated"},
       {"load_ply_garbage",
        [] { load_cloud(write_file("garbage.ply", "ply\nformat what\n\x01\x02")); },
-       "could not be parsed"},
+       "the format must be ascii"},
+      {"load_ply_vertex_list",  // aborted the process in PCL's reader (fuzz/ply_fuzzer)
+       [] {
+         load_cloud(write_file("vertex_list.ply", std::string(kPlyHead) +
+                                                      "element vertex 2\nproperty float x\n"
+                                                      "property float y\nproperty float z\n"
+                                                      "property list uchar int ids\n"
+                                                      "end_header\n0 0 0 0\n1 0 0 2 0 1\n"));
+       },
+       "is a list"},
+      {"load_ply_colours_out_of_order",
+       [] {
+         load_cloud(
+             write_file("colours.ply", std::string(kPlyHead) +
+                                           "element vertex 1\nproperty float x\n"
+                                           "property float y\nproperty float z\n"
+                                           "property uchar green\nproperty uchar red\n"
+                                           "property uchar blue\nend_header\n0 0 0 1 2 3\n"));
+       },
+       "vertex colours must be"},
+      {"load_ply_alpha_alone",
+       [] {
+         load_cloud(write_file("alpha.ply", std::string(kPlyHead) +
+                                                "element vertex 1\nproperty float x\n"
+                                                "property float y\nproperty float z\n"
+                                                "property uchar alpha\nend_header\n0 0 0 1\n"));
+       },
+       "vertex colours must be"},
+      {"load_ply_small_obj_info",
+       [] {
+         load_cloud(write_file("obj_info.ply", std::string(kPlyHead) +
+                                                   "obj_info num_cols 2\nobj_info num_rows 1\n"
+                                                   "element vertex 3\nproperty float x\n"
+                                                   "property float y\nproperty float z\n"
+                                                   "end_header\n0 0 0\n1 0 0\n0 1 0\n"));
+       },
+       "obj_info gives 2 x 1 points, fewer than the 3 vertices"},
+      {"load_ply_inflated_count",
+       [] {
+         load_cloud(write_file("inflated.ply", std::string(kPlyHead) +
+                                                   "element vertex 2000000000\nproperty float x\n"
+                                                   "property float y\nproperty float z\n"
+                                                   "end_header\n0 0 0\n"));
+       },
+       "is truncated"},
+      {"load_ply_camera_viewport_mismatch",
+       [] {
+         load_cloud(write_file("camera.ply", std::string(kPlyHead) +
+                                                 "element vertex 3\nproperty float x\n"
+                                                 "property float y\nproperty float z\n"
+                                                 "element camera 1\nproperty int viewportx\n"
+                                                 "property int viewporty\nend_header\n"
+                                                 "0 0 0\n1 0 0\n0 1 0\n2 1\n"));
+       },
+       "gives 2 x 1 points for 3 vertices"},
+      {"load_ply_duplicate_property",
+       [] {
+         load_cloud(write_file("twice.ply", std::string(kPlyHead) +
+                                                "element vertex 1\nproperty float x\n"
+                                                "property float x\nproperty float z\n"
+                                                "end_header\n0 0 0\n"));
+       },
+       "appears twice"},
       {"save_empty", [] { save_cloud(temp_path("empty_out.pcd"), PointCloud()); },
        "cloud is empty"},
       {"save_bad_extension", [] { save_cloud(temp_path("out.txt"), object()); },

@@ -12,11 +12,11 @@
 
 #include <array>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <random>
 #include <vector>
-#include <filesystem>
-#include <fstream>
 
 namespace spectral_vs {
 namespace {
@@ -137,6 +137,66 @@ TEST(CloudIo, RefusesMissingAndForeignFiles) {
   EXPECT_THROW(load_cloud(temp_file("cloud.xyz")), std::invalid_argument);
   std::filesystem::remove(text);
   std::filesystem::remove(ply);
+}
+
+// PLY files as other tools write them, checked against the values written.
+std::string write_ply(const std::string& name, const std::string& header_and_data) {
+  const std::string path = temp_file(name);
+  std::ofstream(path, std::ios::binary) << "ply\nformat ascii 1.0\n" << header_and_data;
+  return path;
+}
+
+TEST(CloudIo, ReadsAsciiPlyWithColoursAndNormals) {
+  const std::string path = write_ply(
+      "colours.ply",
+      "element vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+      "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n"
+      "property float nx\nproperty float ny\nproperty float nz\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0.1 0.2 0.3 255 0 0 255 0 0 1\n-0.5 0.25 2 0 255 0 128 1 0 0\n3 0 1 1\n");
+  const PointCloud cloud = load_cloud(path);
+  std::filesystem::remove(path);
+  ASSERT_EQ(cloud.size(), 2u);
+  ASSERT_TRUE(cloud.has_normals());
+  EXPECT_NEAR(cloud.points()(0, 2), 0.3, 1e-7);
+  EXPECT_NEAR(cloud.points()(1, 0), -0.5, 1e-7);
+  EXPECT_NEAR(cloud.normals()(0, 2), 1.0, 1e-7);
+  EXPECT_NEAR(cloud.normals()(1, 0), 1.0, 1e-7);
+}
+
+// PCL's ASCII writer gives a cloud with NaN points the full num_cols but only its valid
+// vertices; the reader must not pad them with zero points.
+TEST(CloudIo, ReadsPlyWhoseObjInfoCountsMorePointsThanVertices) {
+  const std::string path =
+      write_ply("padded.ply",
+                "obj_info num_cols 4\nobj_info num_rows 1\nelement vertex 3\nproperty float x\n"
+                "property float y\nproperty float z\nend_header\n1 1 1\n2 2 2\n3 3 3\n");
+  CloudFileInfo info;
+  const PointCloud cloud = load_cloud(path, &info);
+  std::filesystem::remove(path);
+  ASSERT_EQ(cloud.size(), 3u);
+  EXPECT_EQ(info.points_in_file, 3u);
+  EXPECT_NEAR(cloud.points().minCoeff(), 1.0, 1e-7);
+}
+
+// An organized PLY (PCL's writer without a camera): a range_grid maps each cell of the
+// lattice to its vertex, or to none for an invalid pixel.
+TEST(CloudIo, ReadsOrganizedPlyWithRangeGrid) {
+  const std::string path =
+      write_ply("organized.ply",
+                "obj_info num_cols 2\nobj_info num_rows 2\nelement vertex 3\nproperty float x\n"
+                "property float y\nproperty float z\nelement range_grid 4\n"
+                "property list uchar int vertex_indices\nend_header\n"
+                "0 0 1\n0.1 0 1\n0 0.1 1\n1 0\n1 1\n0\n1 2\n");
+  CloudFileInfo info;
+  const PointCloud cloud = load_cloud(path, &info);
+  std::filesystem::remove(path);
+  EXPECT_EQ(info.width, 2u);
+  EXPECT_EQ(info.height, 2u);
+  EXPECT_EQ(info.points_in_file, 4u);
+  EXPECT_EQ(info.non_finite_dropped, 1u);
+  ASSERT_EQ(cloud.size(), 3u);
+  EXPECT_NEAR(cloud.points()(2, 1), 0.1, 1e-7);
 }
 
 TEST(Preprocessing, VoxelDownsampleAveragesPointsAndNormals) {
@@ -406,7 +466,7 @@ TEST(DominantPlane, FindsAPlaneWithKnownNormalAndOffsetInClutter) {
   // The mean of the plane's exact normals and of the few clutter normals within 10 degrees
   // (0.8% of 1000): about 1e-4 rad off.
   EXPECT_LT(plane->normal.cross(n).norm(), 1e-3);
-  EXPECT_NEAR(plane->offset, 0.55, 0.001);                           // within a bin
+  EXPECT_NEAR(plane->offset, 0.55, 0.001);  // within a bin
   // The 3000 plane points, and the few clutter points in the band and the cone.
   EXPECT_GE(plane->count, 3000u);
   EXPECT_LT(plane->count, 3020u);

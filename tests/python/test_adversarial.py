@@ -342,7 +342,7 @@ CASES = [
         "load/truncated ply",
         lambda f: svs.load_cloud(f.path("truncated.ply")),
         ValueError,
-        "could not be parsed",
+        "is truncated",
     ),
     Case(
         "load/inflated point count",  # crashed PCL's reader before the header check

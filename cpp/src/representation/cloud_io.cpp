@@ -13,7 +13,9 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 namespace spectral_vs {
@@ -253,26 +255,209 @@ void check_pcd(const std::string& path) {
   }
 }
 
+// Bytes of a PLY scalar type, or 0 for a name that is not one.
+int ply_type_size(const std::string& type) {
+  static const std::pair<const char*, int> kTypes[] = {
+      {"char", 1},  {"uchar", 1},   {"int8", 1},   {"uint8", 1},  {"short", 2}, {"ushort", 2},
+      {"int16", 2}, {"uint16", 2},  {"int", 4},    {"uint", 4},   {"int32", 4}, {"uint32", 4},
+      {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
+  for (const auto& [name, size] : kTypes) {
+    if (type == name) return size;
+  }
+  return 0;
+}
+
+struct PlyProperty {
+  std::string name, type;
+  bool list = false;
+  int bytes = 0;  // a scalar's size, or a list's count size
+};
+
+// What a PLY header says of the points: the vertex count and, for an organized cloud, the
+// count of its range_grid element (the lattice, -1 without one).
+struct PlyLayout {
+  long long vertices = 0;
+  long long grid = -1;
+};
+
+struct PlyElement {
+  std::string name;
+  long long count = 0;
+  std::vector<PlyProperty> properties;
+};
+
+// PCL's PLY reader handles a uchar red, green, blue (and alpha) of the vertices as one
+// packed colour field, and asserts (aborts the process) or writes a property over another
+// when they come in another order. So they must be one run: red, green, blue, then alpha.
+template <class Bad>
+void check_ply_colours(const PlyElement& vertex, const Bad& bad) {
+  std::vector<std::string> colours;
+  std::vector<std::size_t> at;
+  for (std::size_t i = 0; i < vertex.properties.size(); ++i) {
+    const PlyProperty& property = vertex.properties[i];
+    if (property.type != "uchar" && property.type != "uint8") continue;
+    std::string name = property.name;
+    if (name.rfind("diffuse_", 0) == 0) name = name.substr(8);
+    if (name == "red" || name == "green" || name == "blue" || name == "alpha") {
+      colours.push_back(name);
+      at.push_back(i);
+    }
+  }
+  const std::vector<std::vector<std::string>> allowed = {
+      {}, {"red", "green", "blue"}, {"red", "green", "blue", "alpha"}};
+  const bool adjacent = colours.empty() || at.back() - at.front() + 1 == at.size();
+  if (!adjacent || std::find(allowed.begin(), allowed.end(), colours) == allowed.end()) {
+    bad("the vertex colours must be uchar red, green, blue and an optional alpha, one after "
+        "the other");
+  }
+}
+
+// PCL's PLY reader asserts (aborts the process) on several headers that do not match
+// their data: a list property of the vertices whose length changes (found by
+// fuzz/ply_fuzzer), colours out of order, an organized size (obj_info num_cols and
+// num_rows) smaller than the vertex count. It also allocates what the header's counts
+// ask for before reading. So the header is parsed here first, against the PLY grammar,
+// and those cases are refused.
+PlyLayout check_ply(const std::string& path) {
+  std::ifstream file(path, std::ios::binary);
+  if (!file) fail("path: cannot open ", path);
+  const auto bad = [&path](const auto&... why) {
+    fail("path: ", path, " is not a valid PLY file: ", why...);
+  };
+  std::string line;
+  std::getline(file, line);
+  if (split(line) != std::vector<std::string>{"ply"}) {
+    fail("path: ", path, " is not a PLY file (first line is not 'ply')");
+  }
+  std::string format;
+  std::vector<PlyElement> elements;
+  long long cols = 0, rows = 0;
+  for (int lines = 1;; ++lines) {
+    if (lines == 4096 || !std::getline(file, line)) bad("the header ends without end_header");
+    if (std::any_of(line.begin(), line.end(), [](unsigned char c) {
+          return (c < 32 && c != '\t' && c != '\r') || c == 127;
+        })) {
+      bad("header line ", lines + 1, " holds a control byte");
+    }
+    const std::vector<std::string> tokens = split(line);
+    if (tokens.empty()) bad("header line ", lines + 1, " is empty");
+    const std::string& key = tokens[0];
+    if (key == "end_header") break;
+    if (key == "comment") continue;
+    if (key == "format") {
+      if (tokens.size() != 3 || tokens[2] != "1.0" ||
+          (tokens[1] != "ascii" && tokens[1] != "binary_little_endian" &&
+           tokens[1] != "binary_big_endian")) {
+        bad("the format must be ascii, binary_little_endian or binary_big_endian 1.0, got ",
+            in_quotes(line));
+      }
+      format = tokens[1];
+    } else if (key == "obj_info") {
+      if (tokens.size() >= 3 && (tokens[1] == "num_cols" || tokens[1] == "num_rows")) {
+        const long long value = parse_count(tokens[2]);
+        if (value < 0 || value > std::numeric_limits<std::int32_t>::max()) {
+          bad(tokens[1], " must be a count, got ", in_quotes(line));
+        }
+        (tokens[1] == "num_cols" ? cols : rows) = value;
+      }
+    } else if (key == "element") {
+      const long long count = tokens.size() == 3 ? parse_count(tokens[2]) : -1;
+      if (count < 0 || count > std::numeric_limits<std::int32_t>::max()) {
+        bad("an element must be 'element NAME COUNT', got ", in_quotes(line));
+      }
+      for (const auto& element : elements) {
+        if (element.name == tokens[1]) bad("element ", in_quotes(tokens[1]), " appears twice");
+      }
+      elements.push_back({tokens[1], count, {}});
+      // As PCL's reader: the vertex count is the size unless both were given before.
+      if (tokens[1] == "vertex" && (cols == 0 || rows == 0)) {
+        cols = count;
+        rows = 1;
+      }
+    } else if (key == "property") {
+      if (elements.empty()) bad("a property before any element: ", in_quotes(line));
+      PlyProperty property;
+      property.list = tokens.size() == 5 && tokens[1] == "list";
+      if (property.list) {
+        property.bytes = ply_type_size(tokens[2]);
+        property.type = tokens[3];
+        property.name = tokens[4];
+        if (property.bytes == 0 || ply_type_size(tokens[3]) == 0) {
+          bad("unknown list type in ", in_quotes(line));
+        }
+      } else if (tokens.size() == 3) {
+        property.type = tokens[1];
+        property.name = tokens[2];
+        property.bytes = ply_type_size(tokens[1]);
+        if (property.bytes == 0) bad("unknown property type in ", in_quotes(line));
+      } else {
+        bad("a property must be 'property TYPE NAME' or 'property list COUNT_TYPE TYPE NAME', "
+            "got ",
+            in_quotes(line));
+      }
+      auto& properties = elements.back().properties;
+      for (const auto& other : properties) {
+        if (other.name == property.name) {
+          bad("property ", in_quotes(property.name), " appears twice in element ",
+              in_quotes(elements.back().name));
+        }
+      }
+      properties.push_back(property);
+    } else {
+      bad("unknown header line ", in_quotes(line));
+    }
+  }
+  if (format.empty()) bad("no format line");
+  const auto vertex = std::find_if(elements.begin(), elements.end(),
+                                   [](const PlyElement& e) { return e.name == "vertex"; });
+  if (vertex == elements.end()) bad("no vertex element");
+  for (const auto& property : vertex->properties) {
+    if (property.list) {
+      bad("the vertex property ", in_quotes(property.name),
+          " is a list; point clouds with list properties are not supported");
+    }
+  }
+  check_ply_colours(*vertex, bad);
+  if (cols * rows < vertex->count) {
+    bad("obj_info gives ", cols, " x ", rows, " points, fewer than the ", vertex->count,
+        " vertices");
+  }
+  // Every element's instances need at least this many bytes (a list at least its count;
+  // an ASCII value at least one character), so that no count asks for more memory than
+  // the file could fill.
+  const std::streamoff header_end = file.tellg();
+  file.seekg(0, std::ios::end);
+  const long long available = static_cast<long long>(file.tellg()) - header_end;
+  long long needed = 0;
+  for (const auto& element : elements) {
+    long long per_instance = 0;
+    for (const auto& property : element.properties) {
+      per_instance += format == "ascii" ? 1 : property.bytes;
+    }
+    needed += element.count * per_instance;
+  }
+  if (needed > available) {
+    fail("path: ", path, " is truncated: ", available, " bytes of data, the header needs at least ",
+         needed);
+  }
+  const auto grid = std::find_if(elements.begin(), elements.end(),
+                                 [](const PlyElement& e) { return e.name == "range_grid"; });
+  return {vertex->count, grid == elements.end() ? -1 : grid->count};
+}
+
 // PCL's readers print to stderr and may misbehave on a file that is not a point
-// cloud, so the file is checked here first.
-void check_header(const std::string& path, Format format) {
+// cloud, so the file is checked here first. Returns a PLY file's layout (nothing for PCD,
+// whose check covers its data).
+std::optional<PlyLayout> check_header(const std::string& path, Format format) {
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) {
     fail("path: no such file: ", path);
   }
   if (format == Format::pcd) {
     check_pcd(path);
-    return;
+    return std::nullopt;
   }
-  std::ifstream file(path, std::ios::binary);
-  if (!file) {
-    fail("path: cannot open ", path);
-  }
-  std::string line;
-  std::getline(file, line);
-  if (line.rfind("ply", 0) != 0) {
-    fail("path: ", path, " is not a PLY file (first line is not 'ply')");
-  }
+  return check_ply(path);
 }
 
 const pcl::PCLPointField* find_field(const pcl::PCLPointCloud2& cloud, const char* name) {
@@ -356,6 +541,25 @@ Points extract(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointField* field
   return out;
 }
 
+// PCL sizes a PLY cloud by obj_info num_cols x num_rows, a camera element's viewport or
+// a range_grid element, whichever it read last. A size over the vertex count without a
+// range_grid pads the cloud with zero points (PCL's writer gives such files for a cloud
+// with NaN points), so the cloud is cut back to its vertices; a size under it would drop
+// vertices without a word, so it is refused.
+void match_ply_layout(const PlyLayout& ply, const std::string& path, pcl::PCLPointCloud2& cloud) {
+  const std::uint64_t size = std::uint64_t{cloud.width} * cloud.height;
+  const auto expected = static_cast<std::uint64_t>(ply.grid >= 0 ? ply.grid : ply.vertices);
+  if (size < expected || (ply.grid >= 0 && size != expected)) {
+    fail("path: ", path, " is not a valid PLY file: it gives ", cloud.width, " x ", cloud.height,
+         " points for ", expected, (ply.grid >= 0 ? " range_grid cells" : " vertices"));
+  }
+  if (size > expected) {
+    cloud.width = static_cast<std::uint32_t>(expected);
+    cloud.height = 1;
+    cloud.row_step = cloud.point_step * cloud.width;
+  }
+}
+
 }  // namespace
 
 namespace {
@@ -368,7 +572,7 @@ struct FileContents {
 
 FileContents read_file(const std::string& path) {
   const Format format = format_from_extension(path);
-  check_header(path, format);
+  const std::optional<PlyLayout> ply = check_header(path, format);
   pcl::PCLPointCloud2 cloud;
   int status = -1;
   try {
@@ -385,6 +589,7 @@ FileContents read_file(const std::string& path) {
   if (status < 0) {
     fail("path: ", path, " could not be parsed as a point cloud");
   }
+  if (ply) match_ply_layout(*ply, path, cloud);
   const pcl::PCLPointField* xyz[3] = {find_field(cloud, "x"), find_field(cloud, "y"),
                                       find_field(cloud, "z")};
   if (!xyz[0] || !xyz[1] || !xyz[2]) {
