@@ -41,6 +41,10 @@ refinement_iterations : int
     Iterations of Algorithm 1 per refinement, >= 1.
 icp_refinement : bool
     Point-to-plane ICP after Algorithm 1, kept where it does not lower the score.
+window_search_below : float
+    The window search runs when the kept pose's score is under this, in [0, 1] (0:
+    never; default 0.03): the rotation searched again on windows of the current view as
+    large as the reference.
 sensor_origin : ndarray (3,)
     The current view's sensor origin in its coordinates, m (the origin for a depth
     camera's cloud in its own frame), as AlignParams.sensor_origin. current_viewpoint is
@@ -120,6 +124,7 @@ void define_view_aligner(py::module_& m) {
       .def_readwrite("refinements", &ViewAlignParams::refinements)
       .def_readwrite("refinement_iterations", &ViewAlignParams::refinement_iterations)
       .def_readwrite("icp_refinement", &ViewAlignParams::icp_refinement)
+      .def_readwrite("window_search_below", &ViewAlignParams::window_search_below)
       .def_property(
           "sensor_origin",
           [](const ViewAlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
@@ -204,9 +209,12 @@ correlation : float
 scale : ViewScale
     The voxel sizes it worked at.
 hypothesis : int
-    Index of the kept hypothesis (best correlated first).
+    Index of the kept hypothesis (the search's in order of correlation, then the window
+    search's; -1: the prior).
 icp_iterations : int
     ICP steps of the kept pose (0 without, or when the ICP was not kept).
+windows : int
+    Windows the window search checked (0: it did not run).
 hypotheses : list of (ndarray (4, 4), ViewSupport)
     Every checked hypothesis, best score first.
 )doc")
@@ -230,6 +238,7 @@ hypotheses : list of (ndarray (4, 4), ViewSupport)
       .def_readonly("scale", &ViewAlignResult::scale)
       .def_readonly("hypothesis", &ViewAlignResult::hypothesis)
       .def_readonly("icp_iterations", &ViewAlignResult::icp_iterations)
+      .def_readonly("windows", &ViewAlignResult::windows)
       .def_readonly("hypotheses", &ViewAlignResult::hypotheses)
       .def("__repr__", [](const ViewAlignResult& r) {
         std::ostringstream out;

@@ -824,6 +824,7 @@ class ViewAlignParams:
         refinements: int = ...,
         refinement_iterations: int = ...,
         icp_refinement: bool = ...,
+        window_search_below: float = ...,
         sensor_origin: npt.ArrayLike = ...,
         current_viewpoint: npt.ArrayLike = ...,
         max_seconds: float = ...,
@@ -845,6 +846,7 @@ class ViewAlignParams:
     refinements: int
     refinement_iterations: int
     icp_refinement: bool
+    window_search_below: float  # a support score in [0, 1]; 0: never
     @property
     def sensor_origin(self) -> _Array: ...  # (3,) metres
     @sensor_origin.setter
@@ -896,6 +898,8 @@ class ViewAlignResult:
     def hypothesis(self) -> int: ...
     @property
     def icp_iterations(self) -> int: ...
+    @property
+    def windows(self) -> int: ...  # windows of the window search; 0: it did not run
     @property
     def hypotheses(self) -> list[tuple[_Array, ViewSupport]]: ...
 

@@ -140,6 +140,12 @@ TEST(AlignViews, RefusesBadInput) {
   p = {};
   p.voxels_across = 2.0;
   EXPECT_NE(message(view, view, p).find("voxels_across"), std::string::npos);
+  for (const double below : {-0.1, 1.5, double(NAN)}) {
+    p = {};
+    p.window_search_below = below;
+    EXPECT_NE(message(view, view, p).find("window_search_below must be in [0, 1]"),
+              std::string::npos);
+  }
   Transform not_rigid = Transform::Identity();
   not_rigid(0, 0) = 2.0;
   EXPECT_THROW(view_support(view, view, not_rigid), std::invalid_argument);

@@ -13,6 +13,7 @@
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
+#include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
 
@@ -57,6 +58,16 @@ constexpr Eigen::Index kCoarseIcpPoints = 500;
 constexpr int kCoarseIcpIterations = 10;
 constexpr double kFineTolerance = 0.25;
 
+// The window search (after a missed search): cubic windows of the current view as large
+// as the reference's typical size, centres kWindowStride of a side apart, each holding at
+// least kWindowMinShare of the current's points; kWindowRotations SO(3) candidates per
+// window, each placed within kWindowRoom of a side of where it starts (the reference's
+// centroid on the window's).
+constexpr double kWindowStride = 0.5;
+constexpr double kWindowMinShare = 0.02;
+constexpr int kWindowRotations = 2;
+constexpr double kWindowRoom = 0.5;
+
 // A view's dominant plane (a table top, a floor): the normals within kPlaneCone of its
 // most common direction, when they are over kDominantShare of the view's. Measured on the
 // simulated table, 92% of a view's normals are the table's: the EGI is then one peak
@@ -87,6 +98,9 @@ void check_params(const ViewAlignParams& p) {
   if (p.refinement_iterations < 1)
     fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
   if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
+  if (!(p.window_search_below >= 0.0 && p.window_search_below <= 1.0))
+    fail("window_search_below must be in [0, 1] (a support score; 0: never), got ",
+         p.window_search_below);
   if (!(p.max_seconds >= 0.0 && std::isfinite(p.max_seconds)))
     fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);
   if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
@@ -284,6 +298,85 @@ struct Views {
 
 bool expired(const Views& views) { return Clock::now() > views.deadline; }
 
+// A hypothesis' pose through the short ICP of the placement and its support at the coarse
+// tolerance: what every checked hypothesis goes through.
+void check_hypothesis(const Views& views, Hypothesis& hypothesis) {
+  detail::IcpSettings coarse_icp;
+  coarse_icp.max_distance = views.scale.search_voxel_size;
+  coarse_icp.max_points = kCoarseIcpPoints;
+  coarse_icp.max_iterations = kCoarseIcpIterations;
+  coarse_icp.viewpoint = views.params.sensor_origin;
+  // The EGI's maximum of two partial views lies up to 10-20 degrees from the truth: a
+  // short ICP with pairs within a search voxel brings a right hypothesis close enough
+  // for the support to recognise it.
+  const detail::IcpOutcome icp = detail::refine_point_to_plane(
+      views.model_cloud, views.coarse_scene, views.model.transform_of(hypothesis.pose), coarse_icp);
+  if (icp.iterations > 0) hypothesis.pose = views.model.pose_of(icp.T_scene_model);
+  hypothesis.support =
+      views.support.of(views.model.transform_of(hypothesis.pose), kCoarseTolerance);
+}
+
+// The best rotations of one window's EGI against the reference's, each placed on a small
+// grid around the window (the reference's centroid started on the window's) and checked.
+void add_window_hypotheses(const Views& views, const PointCloud& window, double side,
+                           int first_index, std::vector<Hypothesis>& out) {
+  const ShCoefficients coefficients =
+      egi_coefficients(window, views.params.bandwidth, views.params.egi_method);
+  So3Correlation correlation(coefficients, views.reference_coefficients, views.params.bandwidth,
+                             true);
+  So3SearchParams search;
+  search.candidates = kWindowRotations;
+  search.threads = views.params.threads;
+  RotationRefineParams refine;
+  refine.max_iterations = kRotationRefineIterations;
+  for (const auto& candidate :
+       so3_search(coefficients, views.reference_coefficients, views.params.bandwidth, search)) {
+    Hypothesis hypothesis;
+    hypothesis.index = first_index + int(out.size());
+    hypothesis.pose.R = refine_rotation(correlation, candidate.R, refine).R;
+    hypothesis.pose.offset = window.centroid() - views.model.centroid();
+    const Points& at_start = views.model.move(hypothesis.pose);
+    const Eigen::AlignedBox3d start_box(at_start.colwise().minCoeff().transpose(),
+                                        at_start.colwise().maxCoeff().transpose());
+    SceneTranslation placement(views.map, start_box, kWindowRoom * side,
+                               views.scale.search_voxel_size, views.params.occupancy,
+                               detail::phase_params(views.loop), views.params.limits);
+    hypothesis.pose.offset += placement.estimate(at_start).shift;
+    check_hypothesis(views, hypothesis);
+    out.push_back(hypothesis);
+  }
+}
+
+// Stage: window search. When the search's kept pose finds no support, the rotation is most
+// often what it missed: the current view's EGI is the sum of the reference's part and of
+// surfaces the reference never saw, and where that part is small the correlation's best
+// rotations belong to the rest. Each window of the current view as large as the reference
+// that holds enough of it has an EGI of its own; `windows` counts them.
+std::vector<Hypothesis> window_hypotheses(const Views& views, int first_index, int& windows) {
+  std::vector<Hypothesis> out;
+  const PointCloud& current = views.map.cloud();
+  const double side = detail::typical_size(views.model_cloud.points());
+  if (!(side > 0.0)) return out;
+  const Eigen::AlignedBox3d around = bounding_box(current);
+  const double stride = kWindowStride * side;
+  const Eigen::Array3i steps = ((around.sizes().array() / stride).floor().cast<int>() + 1).min(64);
+  const auto min_points = Eigen::Index(std::ceil(kWindowMinShare * double(current.size())));
+  for (int i = 0; i < steps.x(); ++i) {
+    for (int j = 0; j < steps.y(); ++j) {
+      for (int k = 0; k < steps.z(); ++k) {
+        if (expired(views)) return out;
+        const Eigen::Vector3d centre = around.min() + stride * Eigen::Vector3d(i, j, k);
+        const Eigen::AlignedBox3d cube(centre.array() - 0.5 * side, centre.array() + 0.5 * side);
+        const std::vector<Eigen::Index> inside = views.map.points_in(cube);
+        if (Eigen::Index(inside.size()) < min_points) continue;
+        ++windows;
+        add_window_hypotheses(views, subset(current, inside), side, first_index, out);
+      }
+    }
+  }
+  return out;
+}
+
 // Stage: hypotheses. The best rotations of the SO(3) search of the two EGIs, each refined
 // on the correlation, then placed by phase correlation over both views (the reference's
 // centroid started on the current's), and checked; best supported first.
@@ -306,11 +399,6 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
                              detail::phase_params(views.loop), views.params.limits);
   RotationRefineParams refine;
   refine.max_iterations = kRotationRefineIterations;
-  detail::IcpSettings coarse_icp;
-  coarse_icp.max_distance = views.scale.search_voxel_size;
-  coarse_icp.max_points = kCoarseIcpPoints;
-  coarse_icp.max_iterations = kCoarseIcpIterations;
-  coarse_icp.viewpoint = views.params.sensor_origin;
   std::vector<Hypothesis> out;
   for (std::size_t h = 0; h < candidates.size(); ++h) {
     if (h > 0 && expired(views)) break;
@@ -319,15 +407,7 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
     hypothesis.pose.R = refine_rotation(views.correlation, candidates[h].R, refine).R;
     hypothesis.pose.offset = centred.offset;
     hypothesis.pose.offset += placement.estimate(views.model.move(hypothesis.pose)).shift;
-    // The EGI's maximum of two partial views lies up to 10-20 degrees from the truth: a
-    // short ICP with pairs within a search voxel brings a right hypothesis close enough
-    // for the support to recognise it.
-    const detail::IcpOutcome icp =
-        detail::refine_point_to_plane(views.model_cloud, views.coarse_scene,
-                                      views.model.transform_of(hypothesis.pose), coarse_icp);
-    if (icp.iterations > 0) hypothesis.pose = views.model.pose_of(icp.T_scene_model);
-    hypothesis.support =
-        views.support.of(views.model.transform_of(hypothesis.pose), kCoarseTolerance);
+    check_hypothesis(views, hypothesis);
     out.push_back(hypothesis);
   }
   std::stable_sort(out.begin(), out.end(), [](const Hypothesis& a, const Hypothesis& b) {
@@ -496,15 +576,34 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
     any = true;
     in_time = !expired(views);
   }
+  std::vector<Hypothesis> checked = ranked;
+  int windows_checked = 0;
+  if (in_time && any && best.support.score < params.window_search_below) {
+    std::vector<Hypothesis> windows = window_hypotheses(views, int(ranked.size()), windows_checked);
+    std::stable_sort(windows.begin(), windows.end(), [](const Hypothesis& a, const Hypothesis& b) {
+      return a.support.score > b.support.score;
+    });
+    in_time = !expired(views);
+    for (int i = 0; i < std::min<int>(params.refinements, int(windows.size())) && in_time; ++i) {
+      ViewAlignResult result = refine(views, windows[std::size_t(i)]);
+      if (result.support.score > best.support.score) best = std::move(result);
+      in_time = !expired(views);
+    }
+    checked.insert(checked.end(), windows.begin(), windows.end());
+    std::stable_sort(checked.begin(), checked.end(), [](const Hypothesis& a, const Hypothesis& b) {
+      return a.support.score > b.support.score;
+    });
+  }
   const bool searched = in_time && int(ranked.size()) == params.hypotheses;
   best.status = !searched                     ? ViewAlignStatus::max_seconds
                 : best.support.confirmed == 0 ? ViewAlignStatus::no_support
                                               : ViewAlignStatus::converged;
   best.converged = best.status == ViewAlignStatus::converged;
   best.scale = scale;
+  best.windows = windows_checked;
   best.correlation =
       correlation.evaluate(Eigen::Matrix3d(best.T_current_reference.topLeftCorner<3, 3>())).value;
-  for (const Hypothesis& h : ranked) {
+  for (const Hypothesis& h : checked) {
     best.hypotheses.emplace_back(model.transform_of(h.pose), h.support);
   }
   return best;
