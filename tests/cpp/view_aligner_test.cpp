@@ -84,6 +84,25 @@ TEST_F(TablePair, IsDeterministic) {
   EXPECT_EQ(a.support.score, b.support.score);
 }
 
+// The window search forced to run (its threshold over any score) on a pair the search
+// registers: its hypotheses are checked and added, and the right pose is kept, to the bit,
+// since a window's pose replaces it only when better supported.
+TEST_F(TablePair, TheWindowSearchKeepsARightPose) {
+  params.window_search_below = 0.0;
+  const ViewAlignResult searched = align_views(reference, current, params);
+  params.window_search_below = 1.0;
+  const ViewAlignResult windowed = align_views(reference, current, params);
+  EXPECT_EQ(searched.windows, 0);
+  EXPECT_GT(windowed.windows, 4);
+  EXPECT_GT(windowed.hypotheses.size(), searched.hypotheses.size());
+  EXPECT_EQ(windowed.T_current_reference, searched.T_current_reference);
+  EXPECT_EQ(windowed.support.score, searched.support.score);
+  EXPECT_LT(windowed.hypothesis, params.hypotheses);  // one of the search's
+  for (std::size_t i = 1; i < windowed.hypotheses.size(); ++i) {
+    EXPECT_GE(windowed.hypotheses[i - 1].second.score, windowed.hypotheses[i].second.score);
+  }
+}
+
 TEST_F(TablePair, SupportOfTheTruthIsHighAndOfAWrongPoseLow) {
   const ViewSupport truth = view_support(reference, current, T_current_scan, params);
   const ViewSupport wrong = view_support(reference, current, Transform::Identity(), params);
