@@ -132,7 +132,7 @@ ViewSupport view_support(const PointCloud& reference, const PointCloud& current,
 /// When the kept pose's score is under `window_search_below` (the search missed: the
 /// current view's EGI is mostly surfaces the reference never saw), the rotation is
 /// searched again on windows of the current view as large as the reference, each placed
-/// on a small grid around its window, and the best of those refined too.
+/// on a small grid around its window, and the 3 best of those refined too.
 /// Views that share no surface are not an error: status says no_support.
 /// A `prior` (a pose known from elsewhere, e.g. a tracker's estimate) is refined and
 /// scored beside the search's best hypotheses, as one more of them: the result is the
