@@ -101,6 +101,21 @@ int main(int argc, char** argv) {
         "ply\nformat ascii 1.0\ncomment a triangle\nelement vertex 3\nproperty double x\n"
         "property double y\nproperty double z\nelement face 1\n"
         "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  // The layouts PCL's reader sizes a cloud by, and colours: what check_ply guards.
+  write(out / "ply" / "ascii_colours.ply",
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+        "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+        "property uchar alpha\nend_header\n0 0 1 255 0 0 255\n0.1 0 1 0 255 0 128\n");
+  write(out / "ply" / "ascii_range_grid.ply",
+        "ply\nformat ascii 1.0\nobj_info num_cols 2\nobj_info num_rows 2\nelement vertex 3\n"
+        "property float x\nproperty float y\nproperty float z\nelement range_grid 4\n"
+        "property list uchar int vertex_indices\nend_header\n0 0 1\n0.1 0 1\n0 0.1 1\n"
+        "1 0\n1 1\n0\n1 2\n");
+  write(out / "ply" / "ascii_camera.ply",
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+        "property float z\nelement camera 1\nproperty float view_px\n"
+        "property int viewportx\nproperty int viewporty\nend_header\n0 0 1\n0.1 0 1\n"
+        "0 2 1\n");
   {
     std::string big =
         "ply\nformat binary_big_endian 1.0\nelement vertex 2\nproperty float x\n"
