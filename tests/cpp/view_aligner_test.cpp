@@ -101,6 +101,14 @@ TEST_F(TablePair, TheWindowSearchKeepsARightPose) {
   for (std::size_t i = 1; i < windowed.hypotheses.size(); ++i) {
     EXPECT_GE(windowed.hypotheses[i - 1].second.score, windowed.hypotheses[i].second.score);
   }
+  // Deterministic: the same windows, hypotheses and scores on a second call.
+  const ViewAlignResult again = align_views(reference, current, params);
+  EXPECT_EQ(again.windows, windowed.windows);
+  ASSERT_EQ(again.hypotheses.size(), windowed.hypotheses.size());
+  for (std::size_t i = 0; i < again.hypotheses.size(); ++i) {
+    EXPECT_EQ(again.hypotheses[i].first, windowed.hypotheses[i].first);
+    EXPECT_EQ(again.hypotheses[i].second.score, windowed.hypotheses[i].second.score);
+  }
 }
 
 TEST_F(TablePair, SupportOfTheTruthIsHighAndOfAWrongPoseLow) {
