@@ -212,3 +212,6 @@ def test_the_window_search_finds_a_view_the_search_misses():
     translation = result.T_current_reference[:3, 3] - pair.T_current_reference[:3, 3]
     assert 1000 * np.linalg.norm(translation) < 3.0
     assert result.support.score > 0.1
+    again = svs.align_views(pair.reference, pair.current, sensor_origin=origin)
+    np.testing.assert_array_equal(again.T_current_reference, result.T_current_reference)
+    assert again.windows == result.windows
