@@ -356,22 +356,76 @@ void add_window_hypotheses(const Views& views, const PointCloud& window, double 
 // surfaces the reference never saw, and where that part is small the correlation's best
 // rotations belong to the rest. Each window of the current view as large as the reference
 // that holds enough of it has an EGI of its own; `windows` counts them.
+// The current view's points binned once in cubic cells of a stride, so that finding a
+// window's points costs about its points, not the view's (a current view 30 times the
+// reference's size has 64^3 window centres).
+class StrideCells {
+ public:
+  StrideCells(const Points& points, const Eigen::AlignedBox3d& around, double stride)
+      : points_(points), origin_(around.min()), stride_(stride) {
+    steps_ = ((around.sizes().array() / stride).floor().cast<int>() + 1).min(64);
+    cells_.resize(std::size_t(steps_.prod()));
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+      cells_[index(cell_of(points.row(i).transpose()))].push_back(i);
+    }
+  }
+
+  const Eigen::Array3i& steps() const { return steps_; }
+  Eigen::Vector3d node(const Eigen::Array3i& n) const {
+    return origin_ + stride_ * n.cast<double>().matrix();
+  }
+
+  // The rows inside `cube` (at most a stride from `n` on each axis), in the view's order.
+  void rows_in(const Eigen::AlignedBox3d& cube, const Eigen::Array3i& n,
+               std::vector<Eigen::Index>& rows) const {
+    rows.clear();
+    // The cube spans cells n - 1 and n on each axis; one more each way for rounding.
+    const Eigen::Array3i low = (n - 2).max(0), high = (n + 1).min(steps_ - 1);
+    for (int x = low.x(); x <= high.x(); ++x) {
+      for (int y = low.y(); y <= high.y(); ++y) {
+        for (int z = low.z(); z <= high.z(); ++z) {
+          for (const Eigen::Index row : cells_[index({x, y, z})]) {
+            if (cube.contains(points_.row(row).transpose())) rows.push_back(row);
+          }
+        }
+      }
+    }
+    std::sort(rows.begin(), rows.end());
+  }
+
+ private:
+  Eigen::Array3i cell_of(const Eigen::Vector3d& p) const {
+    return ((p - origin_).array() / stride_).floor().cast<int>().max(0).min(steps_ - 1);
+  }
+  std::size_t index(const Eigen::Array3i& c) const {
+    return (std::size_t(c.x()) * std::size_t(steps_.y()) + std::size_t(c.y())) *
+               std::size_t(steps_.z()) +
+           std::size_t(c.z());
+  }
+
+  const Points& points_;
+  Eigen::Vector3d origin_;
+  double stride_;
+  Eigen::Array3i steps_;
+  std::vector<std::vector<Eigen::Index>> cells_;
+};
+
 std::vector<Hypothesis> window_hypotheses(const Views& views, int first_index, int& windows) {
   std::vector<Hypothesis> out;
   const PointCloud& current = views.map.cloud();
   const double side = detail::typical_size(views.model_cloud.points());
   if (!(side > 0.0)) return out;
-  const Eigen::AlignedBox3d around = bounding_box(current);
-  const double stride = kWindowStride * side;
-  const Eigen::Array3i steps = ((around.sizes().array() / stride).floor().cast<int>() + 1).min(64);
+  const StrideCells cells(current.points(), bounding_box(current), kWindowStride * side);
   const auto min_points = Eigen::Index(std::ceil(kWindowMinShare * double(current.size())));
+  std::vector<Eigen::Index> inside;
+  const Eigen::Array3i& steps = cells.steps();
   for (int i = 0; i < steps.x(); ++i) {
     for (int j = 0; j < steps.y(); ++j) {
       for (int k = 0; k < steps.z(); ++k) {
         if (expired(views)) return out;
-        const Eigen::Vector3d centre = around.min() + stride * Eigen::Vector3d(i, j, k);
+        const Eigen::Vector3d centre = cells.node({i, j, k});
         const Eigen::AlignedBox3d cube(centre.array() - 0.5 * side, centre.array() + 0.5 * side);
-        const std::vector<Eigen::Index> inside = views.map.points_in(cube);
+        cells.rows_in(cube, {i, j, k}, inside);
         if (Eigen::Index(inside.size()) < min_points) continue;
         ++windows;
         add_window_hypotheses(views, subset(current, inside), side, first_index, out);
