@@ -302,6 +302,13 @@ struct Views {
 
 bool expired(const Views& views) { return Clock::now() > views.deadline; }
 
+// Best supported first; of equal scores, in their order.
+void sort_by_support(std::vector<Hypothesis>& hypotheses) {
+  std::stable_sort(
+      hypotheses.begin(), hypotheses.end(),
+      [](const Hypothesis& a, const Hypothesis& b) { return a.support.score > b.support.score; });
+}
+
 // A hypothesis' pose through the short ICP of the placement and its support at the coarse
 // tolerance: what every checked hypothesis goes through.
 void check_hypothesis(const Views& views, Hypothesis& hypothesis) {
@@ -351,11 +358,6 @@ void add_window_hypotheses(const Views& views, const PointCloud& window, double 
   }
 }
 
-// Stage: window search. When the search's kept pose finds no support, the rotation is most
-// often what it missed: the current view's EGI is the sum of the reference's part and of
-// surfaces the reference never saw, and where that part is small the correlation's best
-// rotations belong to the rest. Each window of the current view as large as the reference
-// that holds enough of it has an EGI of its own; `windows` counts them.
 // The current view's points binned once in cubic cells of a stride, so that finding a
 // window's points costs about its points, not the view's (a current view 30 times the
 // reference's size has 64^3 window centres).
@@ -410,6 +412,11 @@ class StrideCells {
   std::vector<std::vector<Eigen::Index>> cells_;
 };
 
+// Stage: window search. When the search's kept pose finds no support, the rotation is most
+// often what it missed: the current view's EGI is the sum of the reference's part and of
+// surfaces the reference never saw, and where that part is small the correlation's best
+// rotations belong to the rest. Each window of the current view as large as the reference
+// that holds enough of it has an EGI of its own; `windows` counts them.
 std::vector<Hypothesis> window_hypotheses(const Views& views, int first_index, int& windows) {
   std::vector<Hypothesis> out;
   const PointCloud& current = views.map.cloud();
@@ -468,9 +475,7 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
     check_hypothesis(views, hypothesis);
     out.push_back(hypothesis);
   }
-  std::stable_sort(out.begin(), out.end(), [](const Hypothesis& a, const Hypothesis& b) {
-    return a.support.score > b.support.score;
-  });
+  sort_by_support(out);
   return out;
 }
 
@@ -526,6 +531,18 @@ ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
   if (views.params.icp_refinement) refine_with_icp(views, result);
   result.support = views.support.of(result.T_current_reference, kFineTolerance);
   return result;
+}
+
+// Refines the first `count` of `ranked` (fewer if there are fewer), each kept in `kept`
+// when there is none yet or it is better supported; false once the time ran out.
+bool refine_into(const Views& views, const std::vector<Hypothesis>& ranked, int count,
+                 std::optional<ViewAlignResult>& kept) {
+  for (std::size_t i = 0; i < std::min(std::size_t(count), ranked.size()); ++i) {
+    ViewAlignResult result = refine(views, ranked[i]);
+    if (!kept || result.support.score > kept->support.score) kept = std::move(result);
+    if (expired(views)) return false;
+  }
+  return true;
 }
 
 PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, double voxel_size) {
@@ -614,44 +631,28 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
                     detail::deadline_of(loop, started)};
 
   const std::vector<Hypothesis> ranked = hypotheses(views);
-  ViewAlignResult best;
-  const int runs = std::min<int>(params.refinements, int(ranked.size()));
+  std::optional<ViewAlignResult> kept;
   bool in_time = true;
-  bool any = false;
   if (prior) {
     // The prior first: a searched pose must be better supported to replace it.
     Hypothesis given;
     given.index = -1;
     given.pose = model.pose_of(*prior);
     given.support = support.of(*prior, kCoarseTolerance);
-    best = refine(views, given);
-    any = true;
+    kept = refine(views, given);
     in_time = !expired(views);
   }
-  for (int i = 0; i < runs && in_time; ++i) {
-    ViewAlignResult result = refine(views, ranked[std::size_t(i)]);
-    if (!any || result.support.score > best.support.score) best = std::move(result);
-    any = true;
-    in_time = !expired(views);
-  }
+  if (in_time) in_time = refine_into(views, ranked, params.refinements, kept);
   std::vector<Hypothesis> checked = ranked;
   int windows_checked = 0;
-  if (in_time && any && best.support.score < params.window_search_below) {
+  if (in_time && kept && kept->support.score < params.window_search_below) {
     std::vector<Hypothesis> windows = window_hypotheses(views, int(ranked.size()), windows_checked);
-    std::stable_sort(windows.begin(), windows.end(), [](const Hypothesis& a, const Hypothesis& b) {
-      return a.support.score > b.support.score;
-    });
-    in_time = !expired(views);
-    for (int i = 0; i < std::min<int>(kWindowRefinements, int(windows.size())) && in_time; ++i) {
-      ViewAlignResult result = refine(views, windows[std::size_t(i)]);
-      if (result.support.score > best.support.score) best = std::move(result);
-      in_time = !expired(views);
-    }
+    sort_by_support(windows);
+    in_time = !expired(views) && refine_into(views, windows, kWindowRefinements, kept);
     checked.insert(checked.end(), windows.begin(), windows.end());
-    std::stable_sort(checked.begin(), checked.end(), [](const Hypothesis& a, const Hypothesis& b) {
-      return a.support.score > b.support.score;
-    });
+    sort_by_support(checked);
   }
+  ViewAlignResult best = kept ? std::move(*kept) : ViewAlignResult();
   const bool searched = in_time && int(ranked.size()) == params.hypotheses;
   best.status = !searched                     ? ViewAlignStatus::max_seconds
                 : best.support.confirmed == 0 ? ViewAlignStatus::no_support

@@ -90,6 +90,15 @@ bool is_number(const std::string& token) {
   return end != begin && *end == '\0';
 }
 
+// The bytes of `file` after its read position, which it keeps.
+long long bytes_left(std::ifstream& file) {
+  const std::streampos at = file.tellg();
+  file.seekg(0, std::ios::end);
+  const long long left = static_cast<long long>(file.tellg() - at);
+  file.seekg(at);
+  return left;
+}
+
 // PCL's header reader does not stop at the DATA line: it reads on, skipping empty and
 // comment lines, and takes the next line that begins with a header keyword (a prefix
 // compare: "FIELDSx" counts) as part of the header, while the data still starts after
@@ -205,9 +214,7 @@ void check_pcd(const std::string& path) {
 
   // The data after the header line.
   const std::streamoff header_end = file.tellg();
-  file.seekg(0, std::ios::end);
-  const std::streamoff file_size = file.tellg();
-  const long long available = file_size - header_end;
+  const long long available = bytes_left(file);
   if (data == "binary") {
     if (available < points * point_step) {
       fail("path: ", path, " is truncated: ", available, " bytes of data for ", points,
@@ -312,6 +319,31 @@ void check_ply_colours(const PlyElement& vertex, const Bad& bad) {
   }
 }
 
+// A `property` header line: `property TYPE NAME` or `property list COUNT_TYPE TYPE NAME`.
+template <class Bad>
+PlyProperty parse_ply_property(const std::vector<std::string>& tokens, const std::string& line,
+                               const Bad& bad) {
+  PlyProperty property;
+  property.list = tokens.size() == 5 && tokens[1] == "list";
+  if (property.list) {
+    property.bytes = ply_type_size(tokens[2]);
+    property.type = tokens[3];
+    property.name = tokens[4];
+    if (property.bytes == 0 || ply_type_size(tokens[3]) == 0) {
+      bad("unknown list type in ", in_quotes(line));
+    }
+  } else if (tokens.size() == 3) {
+    property.type = tokens[1];
+    property.name = tokens[2];
+    property.bytes = ply_type_size(tokens[1]);
+    if (property.bytes == 0) bad("unknown property type in ", in_quotes(line));
+  } else {
+    bad("a property must be 'property TYPE NAME' or 'property list COUNT_TYPE TYPE NAME', got ",
+        in_quotes(line));
+  }
+  return property;
+}
+
 // PCL's PLY reader asserts (aborts the process) on several headers that do not match
 // their data: a list property of the vertices whose length changes (found by
 // fuzz/ply_fuzzer), colours out of order, an organized size (obj_info num_cols and
@@ -376,25 +408,7 @@ PlyLayout check_ply(const std::string& path) {
       }
     } else if (key == "property") {
       if (elements.empty()) bad("a property before any element: ", in_quotes(line));
-      PlyProperty property;
-      property.list = tokens.size() == 5 && tokens[1] == "list";
-      if (property.list) {
-        property.bytes = ply_type_size(tokens[2]);
-        property.type = tokens[3];
-        property.name = tokens[4];
-        if (property.bytes == 0 || ply_type_size(tokens[3]) == 0) {
-          bad("unknown list type in ", in_quotes(line));
-        }
-      } else if (tokens.size() == 3) {
-        property.type = tokens[1];
-        property.name = tokens[2];
-        property.bytes = ply_type_size(tokens[1]);
-        if (property.bytes == 0) bad("unknown property type in ", in_quotes(line));
-      } else {
-        bad("a property must be 'property TYPE NAME' or 'property list COUNT_TYPE TYPE NAME', "
-            "got ",
-            in_quotes(line));
-      }
+      const PlyProperty property = parse_ply_property(tokens, line, bad);
       auto& properties = elements.back().properties;
       for (const auto& other : properties) {
         if (other.name == property.name) {
@@ -425,9 +439,7 @@ PlyLayout check_ply(const std::string& path) {
   // Every element's instances need at least this many bytes (a list at least its count;
   // an ASCII value at least one character), so that no count asks for more memory than
   // the file could fill.
-  const std::streamoff header_end = file.tellg();
-  file.seekg(0, std::ios::end);
-  const long long available = static_cast<long long>(file.tellg()) - header_end;
+  const long long available = bytes_left(file);
   long long needed = 0;
   for (const auto& element : elements) {
     long long per_instance = 0;
