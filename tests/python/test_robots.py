@@ -76,7 +76,7 @@ def test_panda_loads_with_the_arm_joints_only_and_open_fingers(panda):
 
 def test_panda_fingers_stay_open_while_the_arm_moves_in_dynamic_mode():
     params = sim.SimParams(
-        mode="dynamic", robot=sim.robot_model("panda"), scene=sim.SceneParams(object_count=0)
+        mode="dynamic", robot=sim.robot_model("panda"), scene=sim.TableSceneParams(object_count=0)
     )
     with sim.PyBulletRobot(params) as robot:
         q0 = robot.joint_positions()
@@ -107,7 +107,7 @@ def test_panda_home_camera_looks_straight_down_at_the_clutter(panda):
     down = math.degrees(math.acos(np.clip(-T[2, 2], -1.0, 1.0)))
     assert down < 1.0
     np.testing.assert_allclose(T[:3, 3], [0.6, 0.0, 0.55], atol=1e-3)
-    with sim.PyBulletRobot(sim.SimParams(scene=sim.SceneParams(object_count=0))) as iiwa:
+    with sim.PyBulletRobot(sim.SimParams(scene=sim.TableSceneParams(object_count=0))) as iiwa:
         t_mm, r_deg = errors_mm_deg(iiwa.camera_pose(), T)
     assert t_mm < 0.1 and r_deg < 0.01
 
@@ -136,7 +136,7 @@ def test_panda_home_camera_looks_straight_down_at_the_clutter(panda):
 def test_moderate_and_large_starts_are_unchanged():
     """The first starts of seed 0 as they were before the extreme set and the start check
     were added (iiwa, measured at commit b966e7a)."""
-    with sim.PyBulletRobot(sim.SimParams(scene=sim.SceneParams(object_count=0))) as robot:
+    with sim.PyBulletRobot(sim.SimParams(scene=sim.TableSceneParams(object_count=0))) as robot:
         moderate = servo_lib.start_poses(robot.kinematics, "moderate", 2)
         large = servo_lib.start_poses(robot.kinematics, "large", 2, q_reference=sim.HOME_Q)
     got = [(1000 * t, math.degrees(r)) for _, t, r in (*moderate, *large)]
@@ -209,7 +209,7 @@ def _share_from_pybullet(robot, reference_world: np.ndarray) -> float:
 def test_extreme_starts_are_in_range_and_keep_the_reference_in_view(name):
     params = sim.SimParams(
         robot=sim.robot_model(name),
-        scene=sim.SceneParams(object_count=0),
+        scene=sim.TableSceneParams(object_count=0),
         camera=sim.CameraParams(intrinsics=SMALL),
     )
     with sim.PyBulletRobot(params) as robot:
@@ -258,7 +258,7 @@ def test_servo_sim_runs_the_panda_and_names_it(capfd, tmp_path):
     assert code == 1  # two steps do not converge
     assert summary["robot"] == "panda" and summary["set"] == "moderate"
     with sim.PyBulletRobot(
-        sim.SimParams(robot=sim.robot_model("panda"), scene=sim.SceneParams(object_count=0))
+        sim.SimParams(robot=sim.robot_model("panda"), scene=sim.TableSceneParams(object_count=0))
     ) as robot:
         ((_, t, r),) = servo_lib.start_poses(
             robot.kinematics, "moderate", 1, q_reference=sim.PANDA_HOME_Q

@@ -36,7 +36,7 @@ def to_world(cloud: svs.PointCloud, T_world_camera: np.ndarray) -> np.ndarray:
 def empty_table():
     """The robot above an empty table, kinematic mode, small noise-free camera."""
     params = sim.SimParams(
-        scene=sim.SceneParams(object_count=0), camera=sim.CameraParams(intrinsics=SMALL)
+        scene=sim.TableSceneParams(object_count=0), camera=sim.CameraParams(intrinsics=SMALL)
     )
     with sim.PyBulletRobot(params) as robot:
         yield robot
@@ -159,7 +159,7 @@ def test_capture_is_deterministic_with_a_seed():
             sigma_0=0.001, sigma_quadratic=0.002, missing_fraction=0.05, seed=seed
         )
         params = sim.SimParams(
-            scene=sim.SceneParams(object_count=2, seed=4),
+            scene=sim.TableSceneParams(object_count=2, seed=4),
             camera=sim.CameraParams(intrinsics=SMALL, noise=noise),
         )
         with sim.PyBulletRobot(params) as robot:
@@ -261,7 +261,7 @@ def test_kinematic_mode_integrates_the_commanded_velocities(empty_table):
 
 
 def test_dynamic_mode_tracks_velocities_and_holds_when_stopped():
-    params = sim.SimParams(mode="dynamic", scene=sim.SceneParams(object_count=0))
+    params = sim.SimParams(mode="dynamic", scene=sim.TableSceneParams(object_count=0))
     with sim.PyBulletRobot(params) as robot:
         q0 = robot.joint_positions()
         q_dot = np.array([0.2, -0.1, 0.1, 0.2, -0.2, 0.1, 0.3])
@@ -284,3 +284,10 @@ def test_default_scene_puts_clutter_in_view_of_the_home_pose():
         on_objects = world[:, 2] > 0.005
         assert 0.05 < on_objects.mean() < 0.6
         assert np.all(world[:, 2] > -1e-3)  # only table and objects: no floor, no robot
+
+
+def test_the_old_table_settings_name_warns_and_is_the_new_class():
+    with pytest.warns(DeprecationWarning, match="TableSceneParams"):
+        old = sim.SceneParams
+    assert old is sim.TableSceneParams
+    assert sim.TableSceneParams is not svs.SceneParams  # the aligner's scene settings

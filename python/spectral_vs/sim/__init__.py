@@ -44,7 +44,7 @@ from spectral_vs.sim.robots import (
     panda_urdf_path,
     robot_model,
 )
-from spectral_vs.sim.scene import TABLE_HEIGHT, PlacedObject, SceneParams, build_scene
+from spectral_vs.sim.scene import TABLE_HEIGHT, PlacedObject, TableSceneParams, build_scene
 
 __all__ = [
     "BASE_LINK",
@@ -60,8 +60,8 @@ __all__ = [
     "PlacedObject",
     "PyBulletRobot",
     "RobotModel",
-    "SceneParams",
     "SimParams",
+    "TableSceneParams",
     "back_project",
     "build_scene",
     "default_T_tip_camera",
@@ -76,3 +76,19 @@ __all__ = [
     "render_depth",
     "robot_model",
 ]
+
+
+def __getattr__(name: str) -> object:
+    # The simulated table's settings were `SceneParams`, the name of the aligner's scene
+    # settings (`spectral_vs.SceneParams`): kept one release as a deprecated alias.
+    if name == "SceneParams":
+        import warnings
+
+        warnings.warn(
+            "spectral_vs.sim.SceneParams is deprecated: use spectral_vs.sim.TableSceneParams "
+            "(spectral_vs.SceneParams is the aligner's scene settings)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return TableSceneParams
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

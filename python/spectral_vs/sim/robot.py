@@ -34,7 +34,7 @@ from spectral_vs.sim.robots import (
     iiwa_model,
     iiwa_urdf_path,
 )
-from spectral_vs.sim.scene import PlacedObject, SceneParams, build_scene
+from spectral_vs.sim.scene import PlacedObject, TableSceneParams, build_scene
 
 __all__ = [
     "BASE_LINK",
@@ -75,7 +75,7 @@ class SimParams:
         ``robot.T_tip_camera`` when not given.
     camera : CameraParams
         Intrinsics, depth noise and normal estimation.
-    scene : SceneParams
+    scene : TableSceneParams
         Table and clutter.
     """
 
@@ -87,7 +87,7 @@ class SimParams:
     q_start: tuple[float, ...] | None = None
     T_tip_camera: np.ndarray | None = None
     camera: CameraParams = field(default_factory=CameraParams)
-    scene: SceneParams = field(default_factory=SceneParams)
+    scene: TableSceneParams = field(default_factory=TableSceneParams)
 
     def __post_init__(self) -> None:
         if self.mode not in ("kinematic", "dynamic"):

@@ -30,7 +30,7 @@ DEFAULT_OBJECTS: tuple[tuple[str, float], ...] = (
 
 
 @dataclass(frozen=True)
-class SceneParams:
+class TableSceneParams:
     """The table and its clutter.
 
     Attributes
@@ -88,7 +88,7 @@ class PlacedObject:
     yaw: float
 
 
-def build_scene(client, params: SceneParams) -> list[PlacedObject]:
+def build_scene(client, params: TableSceneParams) -> list[PlacedObject]:
     """Load the floor, the table and the clutter into ``client`` (static bodies).
 
     Each object gets a random yaw and a random place in the clutter area where its
@@ -100,7 +100,7 @@ def build_scene(client, params: SceneParams) -> list[PlacedObject]:
     ----------
     client
         A ``pybullet_utils.bullet_client.BulletClient`` (or the ``pybullet`` module).
-    params : SceneParams
+    params : TableSceneParams
         The table and the clutter.
 
     Returns
@@ -147,7 +147,9 @@ def build_scene(client, params: SceneParams) -> list[PlacedObject]:
     return placed
 
 
-def _footprint_centers(halves, params: SceneParams, rng: np.random.Generator) -> list[np.ndarray]:
+def _footprint_centers(
+    halves, params: TableSceneParams, rng: np.random.Generator
+) -> list[np.ndarray]:
     """Centres of non-overlapping boxes of half sizes ``halves`` in the clutter area."""
     area_half = 0.5 * np.asarray(params.clutter_size)
     center = np.asarray(params.clutter_center)
