@@ -108,8 +108,45 @@ def test_align_text_output_and_progress(case, capsys):
     # Progress: one line per stage on stderr, each with its elapsed time.
     lines = err.strip().splitlines()
     assert lines[0].startswith("loading model model.pcd ... 6000 points")
-    assert any(line.startswith("aligning (8 mm voxels, global search") for line in lines)
+    # The voxel is derived from the clouds, as align() derives it, and said so.
+    model, scene = svs.load_cloud(case["model"]), svs.load_cloud(case["scene"])
+    voxel_mm = 1000 * svs.alignment_voxel_size(model, scene)
+    aligning = [line for line in lines if line.startswith("aligning (")]
+    assert len(aligning) == 1
+    assert aligning[0].startswith(f"aligning ({voxel_mm:.3g} mm voxels (derived), global search")
     assert all(re.search(r"\d+ (ms|s)$", line) for line in lines), err
+    # The confidence tells whether to take the pose, with the threshold it is read against.
+    match = re.search(r"confidence ([\d.]+) \(taken as right; threshold 0.91\)", out)
+    assert match and float(match.group(1)) >= 0.91, out
+
+
+def test_align_json_reports_the_confidence_inliers_and_the_voxel_used(case, capsys):
+    code, out, _ = run(
+        capsys, "align", case["model"], case["scene"], "--voxel-size", "0.008", "--json"
+    )
+    report = json.loads(out)
+    assert code == 0
+    assert report["voxel_size_m"] == pytest.approx(0.008)
+    assert report["confidence"] >= svs.CONFIDENCE_THRESHOLD and report["confident"] is True
+    # Inliers: model points within the inlier distance (one voxel) of the scene; the scene
+    # is an independent sample with 1 mm noise, so their RMSE is a few mm, under a voxel.
+    assert report["inlier_distance_mm"] == pytest.approx(8.0, abs=1e-6)
+    assert report["inliers"] > 100
+    assert 0.5 < report["inlier_rmse_mm"] < 8.0
+    assert isinstance(report["ambiguous"], bool) and isinstance(report["alternatives"], list)
+    for alternative in report["alternatives"]:
+        assert np.array(alternative["T_scene_model"]).shape == (4, 4)
+
+
+def test_viewpoint_is_a_deprecated_alias_of_sensor_origin(case, capsys):
+    arguments = ("align", case["model"], case["scene"], "--voxel-size", "0.008", "--json")
+    code, out, err = run(capsys, *arguments, "--viewpoint", "0", "0", "1")
+    assert code == 0
+    assert "--viewpoint is deprecated: use --sensor-origin" in err
+    code, out_new, err_new = run(capsys, *arguments, "--sensor-origin", "0", "0", "1")
+    assert code == 0 and err_new == ""
+    old, new = json.loads(out), json.loads(out_new)
+    assert old["T_scene_model"] == new["T_scene_model"]
 
 
 def test_align_quiet_prints_no_progress(case, capsys):
@@ -316,3 +353,125 @@ def test_translation_demo(data_dir, capsys):
     assert code == 0
     match = re.search(r"error: ([\d.]+) mm", out)
     assert match and float(match.group(1)) < 2.0
+
+
+@pytest.fixture(scope="module")
+def view_pair(data_dir, tmp_path_factory) -> dict:
+    """Two 320 x 240 views of the table scan (disjoint pixels, the current moved by a known
+    transform) as REFERENCE (.pcd) and CURRENT (.ply), and the true T_current_reference."""
+    from spectral_vs import data
+
+    folder = tmp_path_factory.mktemp("views")
+    scan = svs.load_organized(data_dir / "milk_cartoon_all_small_clorox.pcd")
+    pair = data.view_pairs(scan, 1, downscale=2, seed=3)[0]
+    svs.save_cloud(folder / "reference.pcd", pair.reference)
+    svs.save_cloud(folder / "current.ply", pair.current)
+    np.savetxt(folder / "truth.txt", pair.T_current_reference)
+    return {
+        "reference": str(folder / "reference.pcd"),
+        "current": str(folder / "current.ply"),
+        "truth": str(folder / "truth.txt"),
+        "T": np.asarray(pair.T_current_reference),
+        "origin": [str(x) for x in pair.current_viewpoint],
+        "reference_points": np.asarray(pair.reference.points),
+    }
+
+
+def test_align_views_json_recovers_the_pose(view_pair, capsys):
+    code, out, err = run(
+        capsys,
+        "align-views",
+        view_pair["reference"],
+        view_pair["current"],
+        "--sensor-origin",
+        *view_pair["origin"],
+        "--ground-truth",
+        view_pair["truth"],
+        "--json",
+    )
+    report = json.loads(out)
+    assert code == 0 and err == ""
+    assert report["status"] == "converged" and report["passed"] is True
+    T = np.array(report["T_current_reference"])
+    center = view_pair["reference_points"].mean(axis=0)
+    rotation_error, translation_error = errors(T, view_pair["T"], center)
+    assert rotation_error < 1.0
+    assert translation_error < 5.0
+    assert report["rotation_error_deg"] == pytest.approx(rotation_error, abs=1e-6)
+    assert report["translation_error_mm"] == pytest.approx(translation_error, abs=0.2)
+    # A right pose of two views that share 40-80% is well supported (docs/views.md).
+    assert report["score"] > 0.1
+    assert report["score"] == pytest.approx(report["fitness"] * report["overlap"], rel=1e-9)
+    assert report["hypotheses_checked"] == svs.ViewAlignParams().hypotheses
+    assert 0 < report["voxel_size_m"] < report["search_voxel_size_m"]
+
+
+def test_align_views_text_output_progress_and_the_aligned_reference(view_pair, capsys, tmp_path):
+    aligned = tmp_path / "out" / "reference_in_current.ply"
+    code, out, err = run(
+        capsys,
+        "align-views",
+        view_pair["reference"],
+        view_pair["current"],
+        "--sensor-origin",
+        *view_pair["origin"],
+        "--save-aligned",
+        str(aligned),
+    )
+    assert code == 0
+    assert "T_current_reference" in out
+    assert re.search(r"converged: support score [\d.]+ \(fitness [\d.]+, overlap [\d.]+\)", out)
+    lines = err.strip().splitlines()
+    assert lines[0].startswith("loading reference reference.pcd ...")
+    assert all(re.search(r"\d+ (ms|s)$", line) for line in lines), err
+    # The written cloud is the reference moved onto the current view: within a few mm of
+    # where the true transform puts it.
+    moved = np.asarray(svs.load_cloud(aligned).points)
+    reference = view_pair["reference_points"]
+    expected = reference @ view_pair["T"][:3, :3].T + view_pair["T"][:3, 3]
+    assert moved.shape == reference.shape
+    assert np.max(np.linalg.norm(moved - expected, axis=1)) < 0.01  # m
+
+
+def test_align_views_that_share_nothing_exit_1(view_pair, capsys, tmp_path):
+    """A plane seen edge-on from behind (every normal facing away from the sensor): no
+    pose is supported, the command says so and exits with 1."""
+    rng = np.random.default_rng(1)
+    points = np.column_stack([rng.uniform(-0.5, 0.5, (3000, 2)), np.full(3000, 1.0)])
+    away = tmp_path / "away.pcd"
+    svs.save_cloud(away, svs.PointCloud(points, np.tile([0.0, 0.0, 1.0], (3000, 1))))
+    code, out, _ = run(capsys, "align-views", view_pair["reference"], str(away), "--json")
+    report = json.loads(out)
+    assert code == 1
+    assert report["status"] == "no_support" and report["passed"] is False
+    assert report["confirmed"] == 0
+
+
+def test_align_views_bad_input_exits_2_and_names_the_argument(view_pair, capsys, tmp_path):
+    missing = tmp_path / "nowhere.pcd"
+    code, out, err = run(capsys, "align-views", view_pair["reference"], str(missing))
+    assert code == 2 and out == ""
+    assert err.startswith("error: CURRENT: no such file:") and str(missing) in err
+    notes = tmp_path / "notes.pcd"
+    notes.write_text("these are not points\n")
+    code, _, err = run(capsys, "align-views", str(notes), view_pair["current"], "--quiet")
+    assert code == 2 and err.startswith("error: REFERENCE:")
+    (tmp_path / "t.txt").write_text("1 0 0\n0 1 0\n0 0 1\n")
+    code, _, err = run(
+        capsys,
+        "align-views",
+        view_pair["reference"],
+        view_pair["current"],
+        "--prior",
+        str(tmp_path / "t.txt"),
+    )
+    assert code == 2 and err.startswith("error: --prior:") and "4x4" in err
+    code, _, err = run(
+        capsys,
+        "align-views",
+        view_pair["reference"],
+        view_pair["current"],
+        "--save-aligned",
+        str(tmp_path / "out.xyz"),
+    )
+    assert code == 2 and err.startswith("error: --save-aligned:") and "loading" not in err

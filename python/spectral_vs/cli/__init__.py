@@ -1,5 +1,5 @@
-"""The ``spectral-vs`` command line: ``align``, ``demo``, ``translate`` and ``servo-sim``,
-one module per subcommand (each adds its parser and runs it)."""
+"""The ``spectral-vs`` command line: ``align``, ``align-views``, ``demo``, ``translate`` and
+``servo-sim``, one module per subcommand (each adds its parser and runs it)."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import argparse
 import sys
 
 import spectral_vs as svs
-from spectral_vs.cli import align, demo, servo_sim, translate
+from spectral_vs.cli import align, demo, servo_sim, translate, views
 from spectral_vs.cli.common import InputError, _strip_argument
 
-SUBCOMMANDS = (align, demo, translate, servo_sim)
+SUBCOMMANDS = (align, views, demo, translate, servo_sim)
 
 
 def build_parser() -> argparse.ArgumentParser:

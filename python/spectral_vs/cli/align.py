@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -13,9 +14,6 @@ import numpy as np
 import spectral_vs as svs
 from spectral_vs.cli.common import (
     CLOUD_SUFFIXES,
-    MAX_ROTATION_ERROR,
-    MAX_TRANSLATION_ERROR,
-    InputError,
     Progress,
     _check_output,
     _count,
@@ -26,11 +24,15 @@ from spectral_vs.cli.common import (
     _positive_int,
     _within,
     _write,
+    add_check_arguments,
+    add_sensor_origin,
+    check_paths,
     describe_transform,
     read_cloud,
     read_transform,
+    sensor_origin_of,
 )
-from spectral_vs.registration import prepare
+from spectral_vs.registration import derived_voxel_size, prepare
 
 ALIGN_DESCRIPTION = """\
 Find the rigid transform T_scene_model that moves MODEL onto where the same object lies
@@ -42,9 +44,16 @@ T_scene_model is a 4x4 matrix [R t; 0 0 0 1] that maps a point p of the model, i
 coordinates, to R p + t in scene coordinates. Units: metres (clouds, --voxel-size, t),
 degrees and millimetres for the errors against --ground-truth.
 
-Both clouds are downsampled to half a voxel; normals are read from the files when they
-have them, otherwise estimated (radius 2 voxels) and turned toward --viewpoint, the
-sensor's position (the origin for a scan in camera coordinates).
+The voxel is derived from the clouds (their extent and point spacing) unless
+--voxel-size gives it. Both clouds are downsampled to half a voxel; normals are read from
+the files when they have them, otherwise estimated (radius 2 voxels) and turned toward
+--sensor-origin, the sensor's position (the origin for a scan in camera coordinates). A
+scene that is a single view from there (a depth camera's cloud) is detected and its
+hypotheses are checked against what the sensor saw (--scene-view).
+
+The result's confidence (in [0, 1]) separates right from wrong poses: at or above
+svs.CONFIDENCE_THRESHOLD the pose is taken as right (docs/experiments.md). "ambiguous"
+says that other poses, listed as alternatives, fit about as well (a symmetric object).
 
 Exit code: 0 when the alignment converged (and is within the error limits when a ground
 truth is given), 1 when it did not, 2 on bad input."""
@@ -77,7 +86,11 @@ def add_parser(commands: Any, formatter: Any) -> None:
     settings = align.add_argument_group("alignment settings")
     _add_search_settings(settings)
     _add_start_settings(settings)
-    _add_check_arguments(align.add_argument_group("checking against a known answer"))
+    add_check_arguments(
+        align.add_argument_group("checking against a known answer"),
+        "true T_scene_model: prints the rotation error (degrees) and the translation error "
+        "(mm, at the model's centroid)",
+    )
     _add_output_arguments(align.add_argument_group("output"))
     align.set_defaults(run=run_align)
 
@@ -87,9 +100,9 @@ def _add_search_settings(settings: Any) -> None:
     settings.add_argument(
         "--voxel-size",
         type=_positive_float,
-        default=0.008,
         metavar="M",
-        help="voxel edge of the translation grid, metres (default: 0.008)",
+        help="voxel edge of the translation grid, metres (default: derived from the clouds, "
+        "spectral_vs.alignment_voxel_size)",
     )
     settings.add_argument(
         "--bandwidth",
@@ -142,38 +155,24 @@ def _add_start_settings(settings: Any) -> None:
         metavar="FILE",
         help="T_scene_model to start --paper from (the global search ignores its rotation)",
     )
+    add_sensor_origin(
+        settings,
+        "the scene's sensor: estimated normals face it and a single view is detected from it",
+    )
     settings.add_argument(
         "--viewpoint",
         type=float,
         nargs=3,
-        default=(0.0, 0.0, 0.0),
         metavar=("X", "Y", "Z"),
-        help="sensor position that estimated normals face, metres (default: 0 0 0)",
+        help="deprecated alias of --sensor-origin",
     )
-
-
-def _add_check_arguments(check: Any) -> None:
-    """The ground truth and the error limits."""
-    check.add_argument(
-        "--ground-truth",
-        type=Path,
-        metavar="FILE",
-        help="true T_scene_model: prints the rotation error (degrees) and the "
-        "translation error (mm, at the model's centroid)",
-    )
-    check.add_argument(
-        "--max-rotation-error",
-        type=float,
-        default=MAX_ROTATION_ERROR,
-        metavar="DEG",
-        help=f"exit 1 above this rotation error (default: {MAX_ROTATION_ERROR:g})",
-    )
-    check.add_argument(
-        "--max-translation-error",
-        type=float,
-        default=MAX_TRANSLATION_ERROR,
-        metavar="MM",
-        help=f"exit 1 above this translation error (default: {MAX_TRANSLATION_ERROR:g})",
+    settings.add_argument(
+        "--scene-view",
+        choices=("auto", "single_view", "all_sides"),
+        default="auto",
+        help="the scene as a single view from --sensor-origin (checked against what it "
+        "saw), seen from all sides (a full model, a fused map), or auto: detected "
+        "(default: auto)",
     )
 
 
@@ -182,8 +181,8 @@ def _add_output_arguments(output: Any) -> None:
     output.add_argument(
         "--json",
         action="store_true",
-        help="print the result as JSON (transform, converged, iterations, fitness, "
-        "correlation, time, errors) and no progress",
+        help="print the result as JSON (transform, converged, confidence, inliers, "
+        "alternatives, voxel, time, errors) and no progress",
     )
     output.add_argument(
         "--plot",
@@ -226,12 +225,13 @@ def run_align(args: argparse.Namespace) -> int:
         notes.append(f"{len(scene)} points")
     timings["load"] = time.perf_counter() - start
 
-    settings = _settings(args, initial)
+    settings = derived_voxel_size(_settings(args, initial), model, scene)
+    origin = np.asarray(settings.sensor_origin)
 
     start = time.perf_counter()
     with progress.stage("downsampling and estimating normals") as notes:
-        model_ready = prepare(model, "model", args.voxel_size, True, args.viewpoint)
-        scene_ready = prepare(scene, "scene", args.voxel_size, True, args.viewpoint)
+        model_ready = prepare(model, "model", settings.voxel_size, True, origin)
+        scene_ready = prepare(scene, "scene", settings.voxel_size, True, origin)
         notes.append(f"{len(model_ready)} and {len(scene_ready)} points")
     timings["prepare"] = time.perf_counter() - start
 
@@ -241,7 +241,10 @@ def run_align(args: argparse.Namespace) -> int:
         else "local, from the initial guess"
     )
     start = time.perf_counter()
-    with progress.stage(f"aligning ({1000 * args.voxel_size:g} mm voxels, {mode})") as notes:
+    voxel = f"{1000 * settings.voxel_size:.3g} mm voxels"
+    if args.voxel_size is None:
+        voxel += " (derived)"
+    with progress.stage(f"aligning ({voxel}, {mode})") as notes:
         result = svs.align(model_ready, scene_ready, settings, downsample=False)
         notes.append(_count(result.iterations, "iteration"))
     timings["align"] = time.perf_counter() - start
@@ -272,11 +275,7 @@ def run_align(args: argparse.Namespace) -> int:
 
 def _check_paths(args: argparse.Namespace) -> None:
     """The input files exist and the outputs have a known suffix."""
-    for path, argument in ((args.model, "MODEL"), (args.scene, "SCENE")):
-        if not path.exists():  # before any progress line, so the error is the only output
-            raise InputError(f"{argument}: no such file: {path}")
-        if path.is_dir():
-            raise InputError(f"{argument}: {path} is a folder, not a .pcd or .ply file")
+    check_paths(args, ("model", "scene"))
     _check_output(args.plot, "--plot", (".png", ".pdf", ".svg"))
     _check_output(args.render, "--render", (".png", ".pdf", ".svg"))
     _check_output(args.save_aligned, "--save-aligned", CLOUD_SUFFIXES)
@@ -285,7 +284,9 @@ def _check_paths(args: argparse.Namespace) -> None:
 def _settings(args: argparse.Namespace, initial: np.ndarray | None) -> svs.AlignParams:
     """The AlignParams of the command line."""
     settings = svs.AlignParams()
-    settings.voxel_size = args.voxel_size
+    settings.voxel_size = 0.0 if args.voxel_size is None else args.voxel_size
+    settings.sensor_origin = sensor_origin_of(args)
+    settings.scene_view = args.scene_view
     settings.bandwidth = args.bandwidth
     settings.global_search = not args.paper
     settings.threads = args.threads
@@ -355,9 +356,17 @@ def _report(
         "correlation": float(result.correlation),
         "translation_peak": float(result.translation_peak),
         "hypothesis": int(result.hypothesis),
+        "confidence": float(result.confidence),
+        "confident": bool(result.confidence >= svs.CONFIDENCE_THRESHOLD),
+        "inliers": int(result.inliers),
+        "inlier_rmse_mm": 1000 * float(result.inlier_rmse),
+        "inlier_distance_mm": 1000 * float(result.inlier_distance),
+        "ambiguous": bool(result.ambiguous),
+        "alternatives": [_alternative(a) for a in result.alternatives],
+        "single_view": bool(result.single_view),
         "time_s": timings["align"],
         "timings_s": timings,
-        "voxel_size_m": settings.voxel_size,
+        "voxel_size_m": float(result.voxel_size),
         "model_points": points[0],
         "scene_points": points[1],
     }
@@ -365,6 +374,17 @@ def _report(
         report["rotation_error_deg"] = errors[0]
         report["translation_error_mm"] = errors[1]
     return report
+
+
+def _alternative(alternative: svs.AlignAlternative) -> dict[str, Any]:
+    return {
+        "T_scene_model": np.asarray(alternative.T_scene_model).tolist(),
+        "confidence": float(alternative.confidence),
+        "inliers": int(alternative.inliers),
+        "inlier_rmse_mm": 1000 * float(alternative.inlier_rmse),
+        "rotation_apart_deg": math.degrees(alternative.rotation_apart),
+        "translation_apart_mm": 1000 * float(alternative.translation_apart),
+    }
 
 
 def _print_result(
@@ -384,8 +404,21 @@ def _print_result(
     )
     print(
         f"{state} after {_count(result.iterations, 'iteration')}, fitness {result.fitness:.3f}, "
-        f"correlation {result.correlation:.3f}, {_duration(timings['align'])}"
+        f"correlation {result.correlation:.3f}, {1000 * result.voxel_size:.3g} mm voxels, "
+        f"{_duration(timings['align'])}"
     )
+    verdict = "taken as right" if result.confidence >= svs.CONFIDENCE_THRESHOLD else "doubtful"
+    print(
+        f"confidence {result.confidence:.3f} ({verdict}; threshold "
+        f"{svs.CONFIDENCE_THRESHOLD:g}), {result.inliers} inliers within "
+        f"{1000 * result.inlier_distance:.3g} mm, RMSE {1000 * result.inlier_rmse:.2f} mm"
+        + (", single view" if result.single_view else "")
+    )
+    if result.ambiguous:
+        print(
+            f"ambiguous: {_count(len(result.alternatives), 'other pose')} fit about as well "
+            "(--json lists them)"
+        )
     if errors is not None:
         verdict = (
             "ok"

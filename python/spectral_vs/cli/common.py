@@ -171,3 +171,60 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
     return value
+
+
+def add_sensor_origin(group: Any, role: str, flag: str = "--sensor-origin") -> None:
+    """``flag X Y Z``: a sensor's position in its cloud's coordinates, metres (default the
+    origin: a depth camera's cloud in its own frame); ``role`` says what it is used for."""
+    group.add_argument(
+        flag,
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help=f"{role}; metres, in the cloud's coordinates (default: 0 0 0)",
+    )
+
+
+def sensor_origin_of(args: argparse.Namespace) -> tuple[float, float, float]:
+    """--sensor-origin, or the deprecated --viewpoint (with a warning on stderr)."""
+    if getattr(args, "viewpoint", None) is not None:
+        print(
+            "warning: --viewpoint is deprecated: use --sensor-origin (it also sets where a "
+            "single view is seen from)",
+            file=sys.stderr,
+        )
+        if args.sensor_origin is None:
+            return tuple(args.viewpoint)
+    return tuple(args.sensor_origin) if args.sensor_origin is not None else (0.0, 0.0, 0.0)
+
+
+def add_check_arguments(check: Any, ground_truth: str) -> None:
+    """--ground-truth (``ground_truth``: what the file holds and what is printed) and the
+    error limits above which the command exits with 1."""
+    check.add_argument("--ground-truth", type=Path, metavar="FILE", help=ground_truth)
+    check.add_argument(
+        "--max-rotation-error",
+        type=float,
+        default=MAX_ROTATION_ERROR,
+        metavar="DEG",
+        help=f"exit 1 above this rotation error (default: {MAX_ROTATION_ERROR:g})",
+    )
+    check.add_argument(
+        "--max-translation-error",
+        type=float,
+        default=MAX_TRANSLATION_ERROR,
+        metavar="MM",
+        help=f"exit 1 above this translation error (default: {MAX_TRANSLATION_ERROR:g})",
+    )
+
+
+def check_paths(args: argparse.Namespace, inputs: tuple[str, ...]) -> None:
+    """The input files (``args`` attributes ``inputs``, named in upper case) exist and are
+    files, before any progress line, so that the error is the only output."""
+    for name in inputs:
+        path = getattr(args, name)
+        argument = name.upper()
+        if not path.exists():
+            raise InputError(f"{argument}: no such file: {path}")
+        if path.is_dir():
+            raise InputError(f"{argument}: {path} is a folder, not a .pcd or .ply file")
