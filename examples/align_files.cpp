@@ -4,8 +4,8 @@
 //
 // The steps are those of spectral_vs.align in Python: both clouds are voxel-downsampled
 // to half the alignment voxel, clouds without normals get normals fitted over twice the
-// voxel size and oriented toward the sensor (the viewpoint, which is also the sensor_origin
-// from which a single view is detected), then Algorithm 1 runs with a global rotation
+// voxel size and oriented toward the sensor (its origin, from which a single view is also
+// detected), then Algorithm 1 runs with a global rotation
 // search. The voxel, unless given, is derived from the clouds as align() derives it.
 #include <spectral_vs/alignment/aligner.hpp>
 #include <spectral_vs/representation/cloud_io.hpp>
@@ -39,8 +39,9 @@ void print_usage(std::FILE* out) {
                "options:\n"
                "  --voxel-size M      voxel edge of the translation grid, metres (default:\n"
                "                      derived from the model, alignment_voxel_size)\n"
-               "  --viewpoint X Y Z   sensor origin: estimated normals point toward it and a\n"
-               "                      single view is detected from it, metres (default 0 0 0)\n"
+               "  --sensor-origin X Y Z  the scene's sensor: estimated normals point toward it\n"
+               "                      and a single view is detected from it, metres (default\n"
+               "                      0 0 0; --viewpoint is a deprecated alias)\n"
                "  --local             no global rotation search: start from the identity\n"
                "  --max-iterations N  iterations of Algorithm 1 (default 100)\n"
                "  --threads N         threads for the FFTs and the rotation search (default 1)\n"
@@ -53,7 +54,7 @@ struct Options {
   std::string model_path;
   std::string scene_path;
   spectral_vs::AlignParams params;
-  Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sensor_origin = Eigen::Vector3d::Zero();
   bool voxel_given = false;
 };
 
@@ -81,8 +82,10 @@ bool parse_options(int argc, char** argv, Options& options) {
     if (arg == "--voxel-size" && values_left >= 1) {
       ok = parse_double(argv[++i], options.params.scene.voxel_size);
       options.voxel_given = true;
-    } else if (arg == "--viewpoint" && values_left >= 3) {
-      for (int k = 0; k < 3 && ok; ++k) ok = parse_double(argv[++i], options.viewpoint[k]);
+    } else if ((arg == "--sensor-origin" || arg == "--viewpoint") && values_left >= 3) {
+      if (arg == "--viewpoint")
+        std::fprintf(stderr, "warning: --viewpoint is deprecated: use --sensor-origin\n");
+      for (int k = 0; k < 3 && ok; ++k) ok = parse_double(argv[++i], options.sensor_origin[k]);
     } else if (arg == "--local") {
       options.params.search.global_search = false;
     } else if (arg == "--max-iterations" && values_left >= 1) {
@@ -128,11 +131,11 @@ spectral_vs::PointCloud prepared(const spectral_vs::PointCloud& raw,
     std::printf("normals from the file\n");
     return downsampled;
   }
-  std::printf("normals estimated toward (%g, %g, %g)\n", options.viewpoint.x(),
-              options.viewpoint.y(), options.viewpoint.z());
+  std::printf("normals estimated toward (%g, %g, %g)\n", options.sensor_origin.x(),
+              options.sensor_origin.y(), options.sensor_origin.z());
   spectral_vs::NormalEstimationParams normals;
   normals.radius = 2 * voxel_size;
-  normals.viewpoint = options.viewpoint;
+  normals.viewpoint = options.sensor_origin;
   normals.orientation = spectral_vs::NormalOrientation::toward_viewpoint;
   normals.threads = options.params.threads;
   return spectral_vs::estimate_normals(downsampled, normals);
@@ -160,7 +163,7 @@ int main(int argc, char** argv) {
         spectral_vs::load_cloud(options.model_path, &model_info);
     const spectral_vs::PointCloud raw_scene =
         spectral_vs::load_cloud(options.scene_path, &scene_info);
-    options.params.scene.sensor_origin = options.viewpoint;
+    options.params.scene.sensor_origin = options.sensor_origin;
     if (!options.voxel_given)
       options.params.scene.voxel_size = spectral_vs::alignment_voxel_size(raw_model, raw_scene);
     const spectral_vs::PointCloud model =

@@ -167,5 +167,17 @@ int main(int argc, char** argv) {
     ok &= expect(degrees < 2.0, "rotation error below 2 degrees");
     ok &= expect(mm < 4.0, "translation error below 4 mm");
   }
+  // The sensor given by its option, and by the deprecated one, which warns: the same run.
+  const std::string with_origin =
+      quoted(example) + " " + quoted(model_path) + " " + quoted(scene_path);
+  const Run given = run(with_origin + " --sensor-origin 0 0 0");
+  Transform T_given = Transform::Zero(), T_default = Transform::Zero();
+  ok &= expect(given.status == 0 && parse_transform(given.output, T_given) &&
+                   parse_transform(aligned.output, T_default) && T_given == T_default,
+               "--sensor-origin 0 0 0 gives the same T_scene_model as the default origin");
+  const Run deprecated = run(with_origin + " --viewpoint 0 0 0");
+  ok &= expect(deprecated.status == 0 &&
+                   deprecated.output.find("--viewpoint is deprecated") != std::string::npos,
+               "--viewpoint still works and says it is deprecated");
   return ok ? 0 : 1;
 }
