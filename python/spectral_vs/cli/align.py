@@ -28,8 +28,10 @@ from spectral_vs.cli.common import (
     add_sensor_origin,
     check_paths,
     describe_transform,
-    read_cloud,
+    load_clouds,
+    print_errors,
     read_transform,
+    save_moved,
     sensor_origin_of,
 )
 from spectral_vs.registration import derived_voxel_size, prepare
@@ -216,14 +218,9 @@ def run_align(args: argparse.Namespace) -> int:
     truth = read_transform(args.ground_truth, "--ground-truth") if args.ground_truth else None
 
     timings: dict[str, float] = {}
-    start = time.perf_counter()
-    with progress.stage(f"loading model {args.model.name}") as notes:
-        model = read_cloud(args.model, "MODEL")
-        notes.append(f"{len(model)} points")
-    with progress.stage(f"loading scene {args.scene.name}") as notes:
-        scene = read_cloud(args.scene, "SCENE")
-        notes.append(f"{len(scene)} points")
-    timings["load"] = time.perf_counter() - start
+    (model, scene), timings["load"] = load_clouds(
+        progress, args, (("model", "model"), ("scene", "scene"))
+    )
 
     settings = derived_voxel_size(_settings(args, initial), model, scene)
     origin = np.asarray(settings.sensor_origin)
@@ -257,10 +254,7 @@ def run_align(args: argparse.Namespace) -> int:
         errors is None or _within(errors, (args.max_rotation_error, args.max_translation_error))
     )
 
-    if args.save_aligned:
-        with progress.stage(f"writing {args.save_aligned}"):
-            args.save_aligned.parent.mkdir(parents=True, exist_ok=True)
-            svs.save_cloud(args.save_aligned, model.transformed(T))
+    save_moved(progress, args.save_aligned, model, T)
     clouds = (model_ready, scene_ready)
     _write_figures(args, progress, plotting, clouds, result, settings, truth, center)
 
@@ -419,14 +413,4 @@ def _print_result(
             f"ambiguous: {_count(len(result.alternatives), 'other pose')} fit about as well "
             "(--json lists them)"
         )
-    if errors is not None:
-        verdict = (
-            "ok"
-            if _within(errors, (args.max_rotation_error, args.max_translation_error))
-            else "TOO LARGE"
-        )
-        print(
-            f"error against the ground truth: rotation {errors[0]:.2f} deg, translation "
-            f"{errors[1]:.1f} mm at the model centroid ({verdict}; limits "
-            f"{args.max_rotation_error:g} deg, {args.max_translation_error:g} mm)"
-        )
+    print_errors(args, errors, "the model centroid")

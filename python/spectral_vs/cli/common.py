@@ -228,3 +228,39 @@ def check_paths(args: argparse.Namespace, inputs: tuple[str, ...]) -> None:
             raise InputError(f"{argument}: no such file: {path}")
         if path.is_dir():
             raise InputError(f"{argument}: {path} is a folder, not a .pcd or .ply file")
+
+
+def load_clouds(
+    progress: Progress, args: argparse.Namespace, inputs: tuple[tuple[str, str], ...]
+) -> tuple[list[svs.PointCloud], float]:
+    """The clouds of ``args`` attributes ``inputs`` ((attribute, label) each; the argument
+    named in upper case in errors), loaded with a progress line each, and the seconds taken."""
+    start = time.perf_counter()
+    clouds = []
+    for name, label in inputs:
+        path = getattr(args, name)
+        with progress.stage(f"loading {label} {path.name}") as notes:
+            clouds.append(read_cloud(path, name.upper()))
+            notes.append(f"{len(clouds[-1])} points")
+    return clouds, time.perf_counter() - start
+
+
+def save_moved(progress: Progress, path: Path | None, cloud: svs.PointCloud, T: np.ndarray) -> None:
+    """--save-aligned: ``cloud`` moved by ``T``, written to ``path`` when one is given."""
+    if path is not None:
+        with progress.stage(f"writing {path}"):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            svs.save_cloud(path, cloud.transformed(T))
+
+
+def print_errors(args: argparse.Namespace, errors: tuple[float, float] | None, at: str) -> None:
+    """The errors against --ground-truth (the translation's measured ``at`` a point) and
+    whether they are within the limits, when a ground truth was given."""
+    if errors is None:
+        return
+    limits = (args.max_rotation_error, args.max_translation_error)
+    verdict = "ok" if _within(errors, limits) else "TOO LARGE"
+    print(
+        f"error against the ground truth: rotation {errors[0]:.2f} deg, translation "
+        f"{errors[1]:.1f} mm at {at} ({verdict}; limits {limits[0]:g} deg, {limits[1]:g} mm)"
+    )

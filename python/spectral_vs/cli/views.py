@@ -24,8 +24,10 @@ from spectral_vs.cli.common import (
     add_sensor_origin,
     check_paths,
     describe_transform,
-    read_cloud,
+    load_clouds,
+    print_errors,
     read_transform,
+    save_moved,
 )
 
 DESCRIPTION = """\
@@ -147,14 +149,9 @@ def run_views(args: argparse.Namespace) -> int:
     truth = read_transform(args.ground_truth, "--ground-truth") if args.ground_truth else None
 
     timings: dict[str, float] = {}
-    start = time.perf_counter()
-    with progress.stage(f"loading reference {args.reference.name}") as notes:
-        reference = read_cloud(args.reference, "REFERENCE")
-        notes.append(f"{len(reference)} points")
-    with progress.stage(f"loading current {args.current.name}") as notes:
-        current = read_cloud(args.current, "CURRENT")
-        notes.append(f"{len(current)} points")
-    timings["load"] = time.perf_counter() - start
+    (reference, current), timings["load"] = load_clouds(
+        progress, args, (("reference", "reference"), ("current", "current"))
+    )
 
     settings = _settings(args)
     origin = args.reference_sensor_origin or (0.0, 0.0, 0.0)
@@ -172,10 +169,7 @@ def run_views(args: argparse.Namespace) -> int:
     passed = bool(result.converged) and (
         errors is None or _within(errors, (args.max_rotation_error, args.max_translation_error))
     )
-    if args.save_aligned:
-        with progress.stage(f"writing {args.save_aligned}"):
-            args.save_aligned.parent.mkdir(parents=True, exist_ok=True)
-            svs.save_cloud(args.save_aligned, reference.transformed(T))
+    save_moved(progress, args.save_aligned, reference, T)
 
     if args.json:
         report = _report(result, timings, (len(reference), len(current)), errors)
@@ -257,14 +251,4 @@ def _print_result(
         + (f" ({result.windows} windows searched)" if result.windows else "")
         + f", {1000 * result.scale.voxel_size:.3g} mm voxels, {_duration(timings['align'])}"
     )
-    if errors is not None:
-        verdict = (
-            "ok"
-            if _within(errors, (args.max_rotation_error, args.max_translation_error))
-            else "TOO LARGE"
-        )
-        print(
-            f"error against the ground truth: rotation {errors[0]:.2f} deg, translation "
-            f"{errors[1]:.1f} mm at the reference's centroid ({verdict}; limits "
-            f"{args.max_rotation_error:g} deg, {args.max_translation_error:g} mm)"
-        )
+    print_errors(args, errors, "the reference's centroid")
