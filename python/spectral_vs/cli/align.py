@@ -18,16 +18,17 @@ from spectral_vs.cli.common import (
     _check_output,
     _count,
     _duration,
-    _errors,
     _plotting,
     _positive_float,
     _positive_int,
-    _within,
     _write,
     add_check_arguments,
+    add_report_arguments,
+    add_save_aligned,
     add_sensor_origin,
     check_paths,
     describe_transform,
+    ground_truth_errors,
     load_clouds,
     print_errors,
     read_transform,
@@ -180,11 +181,8 @@ def _add_start_settings(settings: Any) -> None:
 
 def _add_output_arguments(output: Any) -> None:
     """What is printed and written."""
-    output.add_argument(
-        "--json",
-        action="store_true",
-        help="print the result as JSON (transform, converged, confidence, inliers, "
-        "alternatives, voxel, time, errors) and no progress",
+    add_report_arguments(
+        output, "transform, converged, confidence, inliers, alternatives, voxel, time, errors"
     )
     output.add_argument(
         "--plot",
@@ -198,13 +196,7 @@ def _add_output_arguments(output: Any) -> None:
         metavar="PNG",
         help="write a picture of the model moving onto the scene (needs matplotlib)",
     )
-    output.add_argument(
-        "--save-aligned",
-        type=Path,
-        metavar="FILE",
-        help="write MODEL moved by T_scene_model (.pcd or .ply)",
-    )
-    output.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_save_aligned(output, "MODEL moved by T_scene_model")
 
 
 def run_align(args: argparse.Namespace) -> int:
@@ -248,11 +240,9 @@ def run_align(args: argparse.Namespace) -> int:
 
     T = np.asarray(result.T_scene_model)
     center = np.asarray(model.centroid())
-    errors = _errors(T, truth, center) if truth is not None else None
+    errors, within = ground_truth_errors(args, T, truth, center)
     # Settled: converged, or a verified hypothesis kept over where Algorithm 1 went.
-    passed = bool(result.converged or result.stop_reason == "kept_start") and (
-        errors is None or _within(errors, (args.max_rotation_error, args.max_translation_error))
-    )
+    passed = bool(result.converged or result.stop_reason == "kept_start") and within
 
     save_moved(progress, args.save_aligned, model, T)
     clouds = (model_ready, scene_ready)

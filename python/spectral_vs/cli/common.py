@@ -253,6 +253,17 @@ def save_moved(progress: Progress, path: Path | None, cloud: svs.PointCloud, T: 
             svs.save_cloud(path, cloud.transformed(T))
 
 
+def ground_truth_errors(
+    args: argparse.Namespace, T: np.ndarray, truth: np.ndarray | None, center: np.ndarray
+) -> tuple[tuple[float, float] | None, bool]:
+    """The errors of ``T`` against --ground-truth ``truth`` (degrees, mm at ``center``; None
+    without one) and whether they are within the limits (True without a ground truth)."""
+    if truth is None:
+        return None, True
+    errors = _errors(T, truth, center)
+    return errors, _within(errors, (args.max_rotation_error, args.max_translation_error))
+
+
 def print_errors(args: argparse.Namespace, errors: tuple[float, float] | None, at: str) -> None:
     """The errors against --ground-truth (the translation's measured ``at`` a point) and
     whether they are within the limits, when a ground truth was given."""
@@ -263,4 +274,21 @@ def print_errors(args: argparse.Namespace, errors: tuple[float, float] | None, a
     print(
         f"error against the ground truth: rotation {errors[0]:.2f} deg, translation "
         f"{errors[1]:.1f} mm at {at} ({verdict}; limits {limits[0]:g} deg, {limits[1]:g} mm)"
+    )
+
+
+def add_report_arguments(output: Any, json_contents: str) -> None:
+    """--json (``json_contents``: what the report holds) and --quiet."""
+    output.add_argument(
+        "--json",
+        action="store_true",
+        help=f"print the result as JSON ({json_contents}) and no progress",
+    )
+    output.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+
+def add_save_aligned(output: Any, moved: str) -> None:
+    """--save-aligned: where to write ``moved`` (which cloud, moved by which transform)."""
+    output.add_argument(
+        "--save-aligned", type=Path, metavar="FILE", help=f"write {moved} (.pcd or .ply)"
     )

@@ -16,14 +16,15 @@ from spectral_vs.cli.common import (
     Progress,
     _check_output,
     _duration,
-    _errors,
     _positive_float,
     _positive_int,
-    _within,
     add_check_arguments,
+    add_report_arguments,
+    add_save_aligned,
     add_sensor_origin,
     check_paths,
     describe_transform,
+    ground_truth_errors,
     load_clouds,
     print_errors,
     read_transform,
@@ -124,19 +125,8 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "error (mm, at the reference's centroid)",
     )
     output = views.add_argument_group("output")
-    output.add_argument(
-        "--json",
-        action="store_true",
-        help="print the result as JSON (transform, status, support, scale, time, errors) "
-        "and no progress",
-    )
-    output.add_argument(
-        "--save-aligned",
-        type=Path,
-        metavar="FILE",
-        help="write REFERENCE moved by T_current_reference (.pcd or .ply)",
-    )
-    output.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_report_arguments(output, "transform, status, support, scale, time, errors")
+    add_save_aligned(output, "REFERENCE moved by T_current_reference")
     views.set_defaults(run=run_views)
 
 
@@ -165,10 +155,8 @@ def run_views(args: argparse.Namespace) -> int:
 
     T = np.asarray(result.T_current_reference)
     center = np.asarray(reference.centroid())
-    errors = _errors(T, truth, center) if truth is not None else None
-    passed = bool(result.converged) and (
-        errors is None or _within(errors, (args.max_rotation_error, args.max_translation_error))
-    )
+    errors, within = ground_truth_errors(args, T, truth, center)
+    passed = bool(result.converged) and within
     save_moved(progress, args.save_aligned, reference, T)
 
     if args.json:
