@@ -20,7 +20,7 @@ Writes ``benchmarks/results/confidence.json``, ``docs/figures/confidence_roc.png
 and the tables between the ``confidence`` and ``heldout`` markers of docs/experiments.md.
 Usage (rerun after any change of the defaults; one command)::
 
-    nice -n 10 python benchmarks/confidence_benchmark.py            # about 15 min, 2 cores
+    nice -n 10 python benchmarks/confidence_benchmark.py            # about 10 min, 2 cores
     python benchmarks/confidence_benchmark.py --quick               # smoke run, writes nothing
     python benchmarks/confidence_benchmark.py --report-only         # tables from the JSON
     nice -n 10 python benchmarks/confidence_benchmark.py --development  # threshold's run
@@ -58,10 +58,12 @@ PARTIAL = ROOT / "benchmarks" / "results" / "confidence.partial.jsonl"
 DEVELOPMENT = ROOT / "benchmarks" / "results" / "confidence_development.jsonl"
 
 ANGLES = (10, 30, 60, 90, 120, 150, 180)
-#: Cases per (family, angle) cell: 7 angles x 1 on each tuning family, 7 x 2 on each
-#: held-out family (each of its 7 objects twice), sized for 2 busy cores.
+#: Cases per (family, angle) cell: 7 angles x 1 on each tuning family, 7 x 6 on each
+#: held-out family (each of its 7 objects six times: 42 cases per condition, so that one
+#: case moves a rate by 2.4 points; with 2 per cell, 14 cases, one case was 7 points and
+#: the 92% target could be told from 86% by a single case).
 CASES_PER_CELL = {f: 1 for f in case_lib.TUNING_FAMILIES} | {
-    f: 2 for f in case_lib.HELDOUT_FAMILIES
+    f: 6 for f in case_lib.HELDOUT_FAMILIES
 }
 SUCCESS_DEG, SUCCESS_M = 5.0, 0.010
 RUNS = ("default", "truncated", "other_object")

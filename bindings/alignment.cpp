@@ -15,11 +15,12 @@ namespace {
 constexpr Choices<RotationStep, 2> kRotationSteps{
     {{"newton", RotationStep::newton}, {"gradient", RotationStep::gradient}}};
 
-constexpr Choices<AlignStopReason, 4> kStopReasons{
+constexpr Choices<AlignStopReason, 5> kStopReasons{
     {{"converged", AlignStopReason::converged},
      {"max_iterations", AlignStopReason::max_iterations},
      {"max_seconds", AlignStopReason::max_seconds},
-     {"kept_start", AlignStopReason::kept_start}}};
+     {"kept_start", AlignStopReason::kept_start},
+     {"reselected", AlignStopReason::reselected}}};
 
 constexpr Choices<SceneView, 3> kSceneViews{{{"auto", SceneView::automatic},
                                              {"single_view", SceneView::single_view},
@@ -235,10 +236,15 @@ verify : bool
 max_alternatives : int
     With global search: at most this many alternatives reported (``AlignResult.alternatives``),
     in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
+reselect_margin : float
+    With global search and alternatives: an alternative more confident than the refined
+    pose by more than this is returned instead (``stop_reason`` ``'reselected'``), in
+    [0, 1] (default 0.1; 1 never reselects).
 )doc");
   define_settings(verification)
       .def_readwrite("verify", &VerificationParams::verify)
-      .def_readwrite("max_alternatives", &VerificationParams::max_alternatives);
+      .def_readwrite("max_alternatives", &VerificationParams::max_alternatives)
+      .def_readwrite("reselect_margin", &VerificationParams::reselect_margin);
 }
 
 void define_align_params(py::module_& m) {
@@ -407,11 +413,12 @@ confidence : float
           "stop_reason",
           [](const AlignResult& r) { return choice_name(r.stop_reason, kStopReasons); },
           "Why the run of the returned pose stopped: 'converged', 'max_iterations', "
-          "'max_seconds', or 'kept_start' (global search: Algorithm 1 ended less fit than "
-          "the hypothesis it started from, whose pose was kept).")
+          "'max_seconds', 'kept_start' (global search: Algorithm 1 ended less fit than "
+          "the hypothesis it started from, whose pose was kept) or 'reselected' (global "
+          "search: an alternative more confident by over reselect_margin was returned).")
       .def_readonly("iterations", &AlignResult::iterations,
                     "Iterations of the Algorithm 1 run that produced the returned pose: "
-                    "len(history); 0 for 'kept_start'.")
+                    "len(history); 0 for 'kept_start' and 'reselected'.")
       .def_readonly(
           "fitness", &AlignResult::fitness,
           "How well the scene supports the pose, in [0, 1]: the share of the model's occupied "

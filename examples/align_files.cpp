@@ -21,8 +21,8 @@
 
 namespace {
 
-// Exit status: 0 when the alignment settled (converged, or kept a verified hypothesis over
-// where Algorithm 1 went: stop_reason kept_start); 3 when it did not (the result is still
+// Exit status: 0 when the alignment settled (converged, or kept a verified pose over where
+// Algorithm 1 went: stop_reason kept_start or reselected); 3 when it did not (the result is still
 // printed); 1 for an error such as an unreadable file; 2 for a bad command line.
 constexpr int kConverged = 0;
 constexpr int kError = 1;
@@ -181,8 +181,9 @@ int main(int argc, char** argv) {
       const auto& T = result.T_scene_model;
       std::printf("  %10.6f %10.6f %10.6f %10.6f\n", T(r, 0), T(r, 1), T(r, 2), T(r, 3));
     }
-    const bool settled =
-        result.converged || result.stop_reason == spectral_vs::AlignStopReason::kept_start;
+    const bool settled = result.converged ||
+                         result.stop_reason == spectral_vs::AlignStopReason::kept_start ||
+                         result.stop_reason == spectral_vs::AlignStopReason::reselected;
     std::printf("converged: %s\n", settled ? "yes" : "no");
     std::printf("iterations: %d\n", result.iterations);
     std::printf("fitness: %.3f\n", result.fitness);

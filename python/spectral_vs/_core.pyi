@@ -486,6 +486,7 @@ class VerificationParams:
         *,
         verify: bool = ...,
         max_alternatives: int = ...,
+        reselect_margin: float = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
@@ -493,6 +494,7 @@ class VerificationParams:
     def __deepcopy__(self, memo: dict[Any, Any]) -> VerificationParams: ...
     verify: bool  # without global search; False: confidence, inliers stay 0
     max_alternatives: int
+    reselect_margin: float  # confidence, in [0, 1]; 1: never reselect
 
 class AlignParams:
     """Settings of spectral_vs.align, grouped by stage (scene, local, search, refinement,
@@ -534,6 +536,7 @@ class AlignParams:
         verification: VerificationParams = ...,
         verify: bool = ...,
         max_alternatives: int = ...,
+        reselect_margin: float = ...,
         initial_guess: npt.ArrayLike = ...,
         threads: int = ...,
         max_seconds: float = ...,
@@ -598,6 +601,7 @@ class AlignParams:
     icp_refinement: bool
     verify: bool  # without global search; False: confidence, inliers stay 0
     max_alternatives: int
+    reselect_margin: float  # confidence, in [0, 1]; 1: never reselect
     # The top-level fields.
     @property
     def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
@@ -635,7 +639,8 @@ class AlignResult:
     @property
     def converged(self) -> bool: ...
     @property
-    def stop_reason(self) -> str: ...  # "converged", "max_iterations", "max_seconds", "kept_start"
+    # "converged", "max_iterations", "max_seconds", "kept_start", "reselected"
+    def stop_reason(self) -> str: ...
     @property
     def iterations(self) -> int: ...
     @property

@@ -81,10 +81,10 @@ def test_align_json_recovers_the_pose(case, capsys):
         "passed",
     ):
         assert key in report
-    assert report["converged"] is True or report["stop_reason"] == "kept_start"
+    assert report["converged"] is True or report["stop_reason"] in ("kept_start", "reselected")
     assert report["passed"] is True
-    # iterations describe the run of the returned pose: none when the hypothesis was kept.
-    assert report["iterations"] >= 1 or report["stop_reason"] == "kept_start"
+    # iterations describe the run of the returned pose: none when it did not end one.
+    assert report["iterations"] >= 1 or report["stop_reason"] in ("kept_start", "reselected")
     assert report["fitness"] > 0.9
     T = np.array(report["T_scene_model"])
     rotation_error, translation_error = errors(T, case["T"], case["points"].mean(axis=0))

@@ -67,6 +67,9 @@ void check(const VerificationParams& p) {
   if (p.max_alternatives < 0 || p.max_alternatives > 64) {
     fail("max_alternatives must be in [0, 64], got ", p.max_alternatives);
   }
+  if (!(p.reselect_margin >= 0.0 && p.reselect_margin <= 1.0)) {
+    fail("reselect_margin must be in [0, 1] (1: never reselect), got ", p.reselect_margin);
+  }
 }
 
 }  // namespace

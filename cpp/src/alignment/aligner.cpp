@@ -180,6 +180,33 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
   return best;
 }
 
+// The last stage: the refinements are ranked by fitness, and the confidence tells right
+// from wrong better (ROC AUC 0.997 against 0.974 on the tuning families). An alternative
+// more confident than the refined pose by over reselect_margin is returned instead; it
+// came from the verification's ICP, not from a run of Algorithm 1. Whether it replaced it.
+bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
+              const Verifier& verifier, AlignResult& best) {
+  if (best.alternatives.empty() ||
+      best.alternatives.front().confidence <=
+          best.confidence + problem.params.verification.reselect_margin)
+    return false;
+  best.T_scene_model = best.alternatives.front().T_scene_model;
+  const Pose pose = problem.model.pose_of(best.T_scene_model);
+  set_verification(best, verifier.verify(model, best.T_scene_model));
+  best.fitness =
+      problem.model.fitness(problem.scene, problem.view, pose, problem.params.scene.voxel_size);
+  best.correlation = prepared.correlation.evaluate(pose.R).value;
+  best.translation_peak = 0.0;
+  best.converged = false;
+  best.stop_reason = AlignStopReason::reselected;
+  best.iterations = 0;
+  best.history.clear();
+  best.hypothesis = -2;
+  best.polish_evaluations = 0;
+  best.icp_iterations = 0;
+  return true;
+}
+
 // Beyond the paper: the global search over SO(3) and R^3, its stages in order.
 AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
                            const AlignParams& params, ScoredModel& moving, Prepared& prepared,
@@ -202,6 +229,8 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
     find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
+    if (reselect(problem, prepared, model, verifier, best))
+      find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
   }
   return best;
 }

@@ -71,6 +71,12 @@ A transform file (--initial-guess, --ground-truth) holds 4 lines of 4 numbers, o
 (4, 4) array saved with numpy.save (.npy)."""
 
 
+def settled(result: svs.AlignResult) -> bool:
+    """Converged, or a verified pose kept over where Algorithm 1 went: the search's
+    hypothesis (``kept_start``) or a clearly more confident alternative (``reselected``)."""
+    return bool(result.converged or result.stop_reason in ("kept_start", "reselected"))
+
+
 def add_parser(commands: Any, formatter: Any) -> None:
     """Add the subcommand to ``commands``, the parser's subparsers."""
     align = commands.add_parser(
@@ -241,8 +247,7 @@ def run_align(args: argparse.Namespace) -> int:
     T = np.asarray(result.T_scene_model)
     center = np.asarray(model.centroid())
     errors, within = ground_truth_errors(args, T, truth, center)
-    # Settled: converged, or a verified hypothesis kept over where Algorithm 1 went.
-    passed = bool(result.converged or result.stop_reason == "kept_start") and within
+    passed = settled(result) and within
 
     save_moved(progress, args.save_aligned, model, T)
     clouds = (model_ready, scene_ready)
@@ -383,9 +388,7 @@ def _print_result(
         print("T_scene_model (moves MODEL coordinates into the SCENE frame, metres):")
         print(T)
     print(describe_transform(T))
-    state = (
-        "converged" if result.converged or result.stop_reason == "kept_start" else "NOT converged"
-    )
+    state = "converged" if settled(result) else "NOT converged"
     print(
         f"{state} after {_count(result.iterations, 'iteration')}, fitness {result.fitness:.3f}, "
         f"correlation {result.correlation:.3f}, {1000 * result.voxel_size:.3g} mm voxels, "

@@ -41,6 +41,7 @@ STOP_REASONS = {
     "max_iterations": "iteration limit",
     "max_seconds": "time budget",
     "kept_start": "the search's hypothesis kept: Algorithm 1 from it ended less fit",
+    "reselected": "an alternative the scene supports clearly better returned instead",
 }
 
 
