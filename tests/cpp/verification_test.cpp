@@ -207,6 +207,9 @@ TEST(AlignAlternatives, NoneAskedNoneSought) {
   EXPECT_FALSE(result.ambiguous);
   params.verification.max_alternatives = 65;
   EXPECT_THROW(align(model, model, params), std::invalid_argument);
+  params.verification.max_alternatives = 8;
+  params.verification.reselect_margin = 1.5;
+  EXPECT_THROW(align(model, model, params), std::invalid_argument);
 }
 
 }  // namespace

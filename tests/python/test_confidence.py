@@ -189,6 +189,38 @@ def test_an_asymmetric_object_is_not_ambiguous(name):
     assert result.alternatives == []
 
 
+def test_a_clearly_more_confident_alternative_is_returned_instead():
+    # A single view of the bunny (tuning family C-2, 10 degrees, case 2): the refinements,
+    # ranked by fitness, keep a wrong pose; one of its alternatives is the truth.
+    case = cases.in_camera_frame(cases.make_case(cases.CaseSpec("partial", "bunny", 10.0, 2)))
+    model, scene = case.model_cloud(), case.scene_cloud()
+    refined = svs.align(model, scene, threads=1, reselect_margin=1.0)
+    assert refined.stop_reason != "reselected"
+    rotation, translation = cases.pose_error(case, refined.T_scene_model)
+    assert rotation > 5.0 or translation > 10 * MM
+    truths = [a for a in refined.alternatives if cases.pose_error(case, a.T_scene_model)[0] < 5.0]
+    assert truths and truths[0].confidence > refined.confidence + 0.1
+
+    result = svs.align(model, scene, threads=1)
+    rotation, translation = cases.pose_error(case, result.T_scene_model)
+    assert rotation < 5.0 and translation < 10 * MM
+    assert result.stop_reason == "reselected" and not result.converged
+    assert result.iterations == 0 and result.history == [] and result.hypothesis == -2
+    assert result.confidence == pytest.approx(truths[0].confidence, abs=1e-9)
+    assert result.confidence > refined.confidence + 0.1
+    # The alternatives are those of the returned pose, apart from it.
+    for alternative in result.alternatives:
+        apart = math.degrees(alternative.rotation_apart) > 5.0
+        assert apart or alternative.translation_apart > 10 * MM
+
+
+def test_reselect_margin_is_checked():
+    case = cases.make_case(cases.CaseSpec("full", "jenga", 30.0, 0))
+    for margin in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="reselect_margin"):
+            svs.align(case.model_cloud(), case.scene_cloud(), reselect_margin=margin)
+
+
 def test_max_alternatives_zero_skips_the_search():
     case = cases.make_case(cases.CaseSpec("full", "jenga", 30.0, 0))
     result = svs.align(case.model_cloud(), case.scene_cloud(), max_alternatives=0)
