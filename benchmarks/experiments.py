@@ -344,7 +344,8 @@ PEER_ERRORS = {"full": "0.1 deg / 0.1 mm", "partial": "0.9 deg / 1 mm"}
 
 
 def sci(x: float | None, unit: str = "") -> str:
-    return "-" if x is None else f"{x:.3g}{unit}"
+    # None as the JSON stores it, NaN as a fresh run holds it (no run of Algorithm 1).
+    return "-" if x is None or math.isnan(x) else f"{x:.3g}{unit}"
 
 
 def errors(c: dict) -> list[str]:

@@ -6,7 +6,8 @@
 //   refinement         Algorithm 1 from each hypothesis, the flat-axis sweep, the polish,
 //                      the ICP;
 //   verifier           the one score of a pose (fitness, confidence, inliers);
-//   alternatives       the other poses the scene supports about as well.
+//   alternatives       the other poses the scene supports about as well;
+//   reselect           an alternative far more confident than the pose replaces it.
 
 #include <spectral_vs/alignment/aligner.hpp>
 
