@@ -323,6 +323,25 @@ def test_part_search_finds_the_target_in_clutter():
     assert successes >= 13
 
 
+def test_each_part_gets_distinct_rotations():
+    """Neighbouring maxima of a part's SO(3) search often climb to one peak of the EGI
+    correlation; placing each spent the part's share of hypotheses on one rotation. Now a
+    rotation within 10 degrees of an earlier one of the part is not placed and the search
+    offers three times as many maxima. The two tuning clutter scenes of the benchmark's
+    cases that this turned into successes (measured: the duck turned 90 degrees, off by
+    135 degrees before; the bunny turned 150 degrees, 160 degrees and 178 mm off before),
+    in their camera's frame with the defaults, within 5 degrees and 10 mm."""
+    cases = _benchmark_cases()
+    for spec in (
+        cases.CaseSpec("clutter", "duck", 90.0, 10),
+        cases.CaseSpec("clutter", "bunny", 150.0, 2),
+    ):
+        case = cases.in_camera_frame(cases.make_case(spec))
+        result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1)
+        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
+        assert rotation_deg < 5.0 and translation_m < 0.010, spec
+
+
 def test_icp_refinement_tightens_the_spectral_result():
     """The final point-to-plane ICP starts where the spectral search ended (about 0.3
     degree / 0.3 mm off on full models: the 8 mm grid's and the EGI's floor) and ends

@@ -26,6 +26,17 @@ constexpr double kCoarsePlacement = 2.0;
 // to the fittest of the turns every kFlatAxisStep, scored with depths within `tolerance`.
 constexpr std::size_t kTurnedHypotheses = 16;
 
+// A part's rotations are distinct: a maximum of the SO(3) search that its refinement on
+// the EGI correlation brings within kDistinctRotationDeg of an earlier one of the same
+// part is not placed, and the search offers kPartCandidateSurplus times as many maxima, so
+// that the part still gets its share of rotations. Neighbouring grid maxima (11 degrees
+// apart at B = 16) often climb to one peak; placing both spent the part's share on one
+// rotation. Measured on 280 tuning clutter scenes (C-3, 40 per angle, in their camera's
+// frame): 252 right before, 255 at 5 degrees and 256 at 10 (4 gained, none lost), at the
+// same CPU time; single views (140) 132 before and after, the milk scene 140 of 140.
+constexpr double kDistinctRotationDeg = 10.0;
+constexpr int kPartCandidateSurplus = 3;
+
 // Turn between two rotations, degrees.
 double turn_deg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
   const double c = std::clamp(0.5 * ((a.transpose() * b).trace() - 1.0), -1.0, 1.0);
@@ -84,7 +95,7 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
   const AlignParams& params = problem.params;
   const PointCloud& scene = problem.scene.cloud();
   So3SearchParams search;
-  search.candidates = per_part;
+  search.candidates = kPartCandidateSurplus * per_part;
   search.threads = params.threads;
   RotationRefineParams refine;
   refine.newton = params.local.rotation_step == RotationStep::newton;
@@ -112,11 +123,18 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
                      kCoarsePlacement * params.scene.voxel_size, params.scene.occupancy,
                      phase_params(params), params.limits);
     }
+    std::vector<Eigen::Matrix3d> kept;
     for (const RotationCandidate& candidate :
          so3_search(coefficients, problem.model_coefficients, params.scene.bandwidth, search)) {
+      if (int(kept.size()) == per_part) break;
       Hypothesis hypothesis;
       hypothesis.index = int(hypotheses.size());
       hypothesis.pose.R = refine_rotation(*correlation, candidate.R, refine).R;
+      if (std::any_of(kept.begin(), kept.end(), [&](const Eigen::Matrix3d& R) {
+            return turn_deg(R, hypothesis.pose.R) < kDistinctRotationDeg;
+          }))
+        continue;
+      kept.push_back(hypothesis.pose.R);
       hypothesis.pose.offset = centroid - problem.model.centroid();
       if (problem.viewpoint) {
         hypothesis.pose.offset -=

@@ -23,8 +23,9 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
                                           const ShCoefficients& scene_coefficients,
                                           double search_voxel);
 
-/// `per_part` rotations of the SO(3) search on each part's own EGI, placed in a window
-/// around the part, fittest first.
+/// `per_part` distinct rotations (refined on the EGI correlation, at least
+/// kDistinctRotationDeg apart) of the SO(3) search on each part's own EGI, placed in a
+/// window around the part, fittest first.
 std::vector<Hypothesis> part_hypotheses(const Problem& problem,
                                         const std::vector<std::vector<Eigen::Index>>& parts,
                                         int per_part, std::optional<TranslationWindow>& window);
