@@ -3,9 +3,10 @@
 Per case, the CPU time of ``align(model, scene, threads=1)`` with the defaults and with
 ``max_alternatives=0`` (no search for the other poses a symmetric object allows), the
 best of ``--repeats`` runs each, and whether both return the same pose (they do unless
-the reselection returned an alternative instead: ``stop_reason == 'reselected'``). Cases: the real milk scene and a few per benchmark family,
-in the camera frame as benchmarks/experiments.py runs them (a timing only: nothing is
-chosen on the held-out families here). Writes benchmarks/results/alternatives.json and
+the reselection returned an alternative instead: ``stop_reason == 'reselected'``).
+Cases: the real milk scene and a few per benchmark family, in the camera frame as
+benchmarks/experiments.py runs them (a timing only: nothing is chosen on the held-out
+families here). Writes benchmarks/results/alternatives.json and
 the table in docs/alignment.md. Usage (2 cores shared: one thread, niced)::
 
     OMP_NUM_THREADS=1 nice -n 10 python benchmarks/alternatives_benchmark.py [--cases 4]
