@@ -166,7 +166,7 @@ global_search : bool
     from initial_guess (the paper's mode), and the rest of this group is not read.
 hypotheses : int
     Rotations of the global search that are placed and verified (default 48); half as
-    many per part of a cluttered scene.
+    many per part of a cluttered scene, each at least 10 degrees from the part's others.
 refinements : int
     The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
     scene around it; the best final fitness is kept (default 3, at most hypotheses).

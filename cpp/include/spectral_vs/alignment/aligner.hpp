@@ -99,7 +99,8 @@ struct GlobalSearchParams {
                               ///< enough to hold the true one among the near-equal maxima of
                               ///< an object with symmetric faces. Searched per part of a
                               ///< cluttered scene (see SceneParams::suppress_support_plane):
-                              ///< half as many per part, at least 1. >= 1.
+                              ///< half as many per part, at least 1, each at least 10 degrees
+                              ///< from the part's others once refined. >= 1.
   int refinements = 3;        ///< The best-verified hypotheses that Algorithm 1 then runs from,
                               ///< each in a window of the scene around it; the one with the
                               ///< best final fitness is kept. In [1, hypotheses].
