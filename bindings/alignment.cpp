@@ -235,7 +235,7 @@ verify : bool
     global search the poses are always verified.
 max_alternatives : int
     With global search: at most this many alternatives reported (``AlignResult.alternatives``),
-    in [0, 64] (default 8); 0 skips their search and ``ambiguous``.
+    in [0, 64] (default 8); 0 skips their search, ``ambiguous`` and the reselection.
 reselect_margin : float
     With global search and alternatives: an alternative more confident than the refined
     pose by more than this is returned instead (``stop_reason`` ``'reselected'``), in

@@ -161,7 +161,8 @@ struct VerificationParams {
   /// the poses are always verified: the check ranks the alternatives.
   bool verify = true;
   /// With global search: at most this many alternatives are reported
-  /// (AlignResult::alternatives), in [0, 64]; 0 skips their search (and `ambiguous`).
+  /// (AlignResult::alternatives), in [0, 64]; 0 skips their search (and `ambiguous` and
+  /// the reselection).
   int max_alternatives = 8;
   /// With global search and alternatives: when the best alternative's confidence exceeds
   /// the refined pose's by more than this, the alternative is returned instead
