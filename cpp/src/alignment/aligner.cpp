@@ -184,15 +184,18 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
 // from wrong better (ROC AUC 0.997 against 0.974 on the tuning families). An alternative
 // more confident than the refined pose by over reselect_margin is returned instead; it
 // came from the verification's ICP, not from a run of Algorithm 1. Whether it replaced it.
-bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
-              const Verifier& verifier, AlignResult& best) {
+bool reselect(const Problem& problem, Prepared& prepared, AlignResult& best) {
   if (best.alternatives.empty() ||
       best.alternatives.front().confidence <=
           best.confidence + problem.params.verification.reselect_margin)
     return false;
-  best.T_scene_model = best.alternatives.front().T_scene_model;
+  // Verified by the same verifier as the refined pose: its figures are the pose's.
+  const AlignAlternative& chosen = best.alternatives.front();
+  best.T_scene_model = chosen.T_scene_model;
+  best.confidence = chosen.confidence;
+  best.inliers = chosen.inliers;
+  best.inlier_rmse = chosen.inlier_rmse;
   const Pose pose = problem.model.pose_of(best.T_scene_model);
-  set_verification(best, verifier.verify(model, best.T_scene_model));
   best.fitness =
       problem.model.fitness(problem.scene, problem.view, pose, problem.params.scene.voxel_size);
   best.correlation = prepared.correlation.evaluate(pose.R).value;
@@ -224,12 +227,16 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
   best.search_voxel_size = search_voxel;
   const Verifier verifier(scene, params.scene.voxel_size, prepared.viewpoint);
   set_verification(best, verifier.verify(model, best.T_scene_model));
-  if (best.stop_reason != AlignStopReason::max_seconds) {
-    AlternativeSources sources{prepared.model_coefficients, params.scene.bandwidth, axis, {}};
+  if (best.stop_reason != AlignStopReason::max_seconds &&
+      params.verification.max_alternatives > 0) {
+    AlternativeSources sources{
+        model_symmetries(prepared.model_coefficients, params.scene.bandwidth, params.threads),
+        axis,
+        {}};
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
     find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
-    if (reselect(problem, prepared, model, verifier, best))
+    if (reselect(problem, prepared, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
   }
   return best;

@@ -162,25 +162,10 @@ std::optional<Transform> passes_screening(const PointCloud& sparse, const Verifi
 // turned by the model's near-symmetries, by steps about its flat EGI axis, and the
 // global search's first hypotheses as they are.
 std::vector<Candidate> proposed_poses(const Transform& T, const Eigen::Vector3d& c,
-                                      const AlternativeSources& sources, int threads) {
+                                      const AlternativeSources& sources) {
   std::vector<Candidate> poses;
-  try {
-    So3Correlation self(sources.model_coefficients, sources.model_coefficients, sources.bandwidth,
-                        true);
-    So3SearchParams search;
-    search.candidates = kSelfCandidates;
-    search.threads = threads;
-    RotationRefineParams refine;
-    for (const RotationCandidate& candidate : so3_search(
-             sources.model_coefficients, sources.model_coefficients, sources.bandwidth, search)) {
-      const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
-      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees) {
-        poses.push_back({turned(T, R, c), {}, false, 0.0});
-      }
-    }
-  } catch (const std::invalid_argument&) {
-    // A uniform EGI (a sphere's): no rotation stands out.
-  }
+  for (const Eigen::Matrix3d& R : sources.symmetries)
+    poses.push_back({turned(T, R, c), {}, false, 0.0});
   if (sources.flat_axis) {
     const int count = static_cast<int>(std::lround(2.0 * M_PI / kAxisStep));
     for (int k = 1; k < count; ++k) {
@@ -211,6 +196,27 @@ AlignAlternative alternative_of(const Candidate& candidate, const Transform& T,
 
 }  // namespace
 
+std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coefficients,
+                                              int bandwidth, int threads) {
+  std::vector<Eigen::Matrix3d> symmetries;
+  try {
+    So3Correlation self(model_coefficients, model_coefficients, bandwidth, true);
+    So3SearchParams search;
+    search.candidates = kSelfCandidates;
+    search.threads = threads;
+    RotationRefineParams refine;
+    for (const RotationCandidate& candidate :
+         so3_search(model_coefficients, model_coefficients, bandwidth, search)) {
+      const Eigen::Matrix3d R = refine_rotation(self, candidate.R, refine).R;
+      if (rotation_distance(R, Eigen::Matrix3d::Identity()) * 180.0 / M_PI > kApartDegrees)
+        symmetries.push_back(R);
+    }
+  } catch (const std::invalid_argument&) {
+    // A uniform EGI (a sphere's): no rotation stands out.
+  }
+  return symmetries;
+}
+
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
                        const AlternativeSources& sources, const AlignParams& params,
                        const std::optional<Eigen::Vector3d>& viewpoint, AlignResult& result) {
@@ -220,7 +226,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   const Eigen::Vector3d c = model.centroid();
   const Transform& T = result.T_scene_model;
 
-  const std::vector<Candidate> proposed = proposed_poses(T, c, sources, params.threads);
+  const std::vector<Candidate> proposed = proposed_poses(T, c, sources);
 
   // The likeliest by inliers first, counted on every kSparseStride-th model point (the
   // nearest-point queries of every candidate are most of this stage's time), then refined

@@ -14,11 +14,16 @@ namespace spectral_vs::detail {
 
 /// What the alternatives are sought from.
 struct AlternativeSources {
-  const ShCoefficients& model_coefficients;  ///< the model's EGI (its own symmetries)
-  int bandwidth = 16;
+  std::vector<Eigen::Matrix3d> symmetries;   ///< the model's near-symmetries (model_symmetries)
   std::optional<Eigen::Vector3d> flat_axis;  ///< of the model's EGI, model frame, if any
   std::vector<Transform> hypotheses;         ///< the global search's poses, best first
 };
+
+/// The model's near-symmetries, model frame: the best maxima of its EGI correlated with
+/// itself, refined, the identity (within kApartDegrees) left out; none for a uniform EGI.
+/// They do not depend on the pose, so one alignment finds them once.
+std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coefficients,
+                                              int bandwidth, int threads);
 
 /// The poses apart from `result`'s (rotation over kApartDegrees or model centroid over
 /// kApartMetres) and from each other, whose confidence is within kAlternativeMargin of
