@@ -123,7 +123,7 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
   } else {
     const int per_part =
         prepared.plane ? std::max(1, params.search.hypotheses / 2) : params.search.hypotheses;
-    hypotheses = part_hypotheses(problem, parts, per_part, window);
+    hypotheses = part_hypotheses(problem, parts, per_part, prepared.plane.has_value(), window);
     seed_with_guess(problem, hypotheses, params.scene.voxel_size);
     turn_about_flat_axis(problem, hypotheses, params.scene.voxel_size);
   }

@@ -4,6 +4,7 @@
 #include <spectral_vs/rotation/so3_search.hpp>
 
 #include "alignment/icp_refinement.hpp"
+#include "alignment/scene_map.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -25,19 +26,6 @@ constexpr std::size_t kHypotheses = 8;
 constexpr int kRefinedPerAlternative = 2;
 // A candidate is dropped before the ICP below this share of the returned pose's inliers.
 constexpr double kMinInlierShare = 0.5;
-// Model points the pre-selection counts inliers on: every this-many-th.
-constexpr Eigen::Index kSparseStride = 8;
-
-// Every stride-th point (and normal) of `cloud`, at least its first.
-PointCloud every_nth(const PointCloud& cloud, Eigen::Index stride) {
-  const Eigen::Index n = (cloud.size() + stride - 1) / stride;
-  Points points(n, 3), normals(n, 3);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    points.row(i) = cloud.points().row(i * stride);
-    normals.row(i) = cloud.normals().row(i * stride);
-  }
-  return PointCloud(points, normals);
-}
 
 struct Candidate {
   Transform T = Transform::Identity();

@@ -25,10 +25,12 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
 
 /// `per_part` distinct rotations (refined on the EGI correlation, at least
 /// kDistinctRotationDeg apart) of the SO(3) search on each part's own EGI, placed in a
-/// window around the part, fittest first.
+/// window around the part, fittest first. With `screen` (clutter), the search's maxima
+/// are first placed coarsely on a sparse model and tried fittest first.
 std::vector<Hypothesis> part_hypotheses(const Problem& problem,
                                         const std::vector<std::vector<Eigen::Index>>& parts,
-                                        int per_part, std::optional<TranslationWindow>& window);
+                                        int per_part, bool screen,
+                                        std::optional<TranslationWindow>& window);
 
 /// The best-ranked hypotheses turned to the fittest of their turns about the model's
 /// flat axis (problem.flat_axis), when it has one.

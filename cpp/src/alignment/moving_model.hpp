@@ -60,6 +60,11 @@ class MovingModel {
     return T;
   }
 
+  /// The model as it was given (points and normals).
+  PointCloud cloud() const {
+    return PointCloud(Points(centred_.rowwise() + centroid_.transpose()), normals_);
+  }
+
   /// The model's points at `pose`, in the scene (valid until the next call).
   const Points& move(const Pose& pose) {
     moved_.noalias() = centred_ * pose.R.transpose();

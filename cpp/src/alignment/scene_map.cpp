@@ -75,6 +75,16 @@ Points rows_of(const Points& matrix, const std::vector<Eigen::Index>& rows) {
   return selected;
 }
 
+PointCloud every_nth(const PointCloud& cloud, Eigen::Index stride) {
+  const Eigen::Index n = (cloud.size() + stride - 1) / stride;
+  Points points(n, 3), normals(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    points.row(i) = cloud.points().row(i * stride);
+    normals.row(i) = cloud.normals().row(i * stride);
+  }
+  return PointCloud(points, normals);
+}
+
 std::uint64_t voxel_key(const Eigen::Array3i& voxel) {
   const Eigen::Array3i k = (voxel + (1 << 20)).max(0).min((1 << 21) - 1);
   return (std::uint64_t(k.x()) << 42) | (std::uint64_t(k.y()) << 21) | std::uint64_t(k.z());

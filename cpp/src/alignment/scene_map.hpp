@@ -19,6 +19,16 @@ namespace spectral_vs::detail {
 /// The rows `rows` of `matrix`, in that order.
 Points rows_of(const Points& matrix, const std::vector<Eigen::Index>& rows);
 
+/// Every stride-th point (and normal) of `cloud`, at least its first.
+PointCloud every_nth(const PointCloud& cloud, Eigen::Index stride);
+
+// The sparse model that candidate poses are screened on (a part's rotations in clutter,
+// the alternatives): every this-many-th model point, an eighth of the nearest-point
+// queries. Screening a part's rotations on every 8th point, 263 of 280 tuning clutter
+// scenes come out right, as on every 4th; on every 2nd, 261; at 0.95 and 0.86 times
+// their CPU time.
+constexpr Eigen::Index kSparseStride = 8;
+
 /// A voxel (or cell) index as one sortable key, 21 bits per axis, each index clamped to
 /// [-2^20, 2^20 - 1]: the sparse sets of voxels of the fitness and of connected_parts.
 std::uint64_t voxel_key(const Eigen::Array3i& voxel);
