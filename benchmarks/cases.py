@@ -357,9 +357,26 @@ HELDOUT_OBJECTS: dict[str, ObjectSpec] = {
 }
 
 
+#: Thin tuning-side objects, outside the benchmark's cycles (FAMILY_OBJECTS): measured
+#: in clutter among the tuning objects by benchmarks/thin_objects.py. The plate is the
+#: jenga mesh (a tuning object's) cut to 120 x 90 x 9 mm; lying on the table, its top
+#: face is within 1.5 voxels of the table (docs/experiments.md, "Thin objects").
+THIN_OBJECTS: dict[str, ObjectSpec] = {
+    "plate": ObjectSpec(
+        "jenga/jenga.obj",
+        0.12,
+        stretch=(0.12, 0.09, 0.009),
+        symmetry=Symmetry(BOX_GROUP, "plate 120 x 90 x 9 mm: half turns about its 3 axes"),
+    ),
+}
+
+
 def object_spec(name: str) -> ObjectSpec:
-    """The spec of a tuning object (OBJECTS) or a held-out one (HELDOUT_OBJECTS)."""
-    return OBJECTS[name] if name in OBJECTS else HELDOUT_OBJECTS[name]
+    """The spec of a tuning object (OBJECTS, THIN_OBJECTS) or a held-out one."""
+    for objects in (OBJECTS, THIN_OBJECTS, HELDOUT_OBJECTS):
+        if name in objects:
+            return objects[name]
+    raise KeyError(name)
 
 
 @dataclass(frozen=True)
@@ -852,7 +869,8 @@ def clutter_case(spec: CaseSpec, noise: bool = True) -> Case:
     rng = np.random.default_rng(spec.seed)
     mesh = load_mesh(spec.object)
     model_points, model_normals = sample_surface(mesh, MODEL_SAMPLES, rng)
-    pool = OBJECTS if spec.object in OBJECTS else HELDOUT_OBJECTS  # held-out among held-out
+    # Held-out among held-out; tuning and thin ones among tuning ones.
+    pool = HELDOUT_OBJECTS if spec.object in HELDOUT_OBJECTS else OBJECTS
     others = [n for n in pool if n != spec.object]
     # The held-out objects are larger (up to 0.25 m): 2-3 others, on most of the table.
     low, high = (3, 6) if pool is OBJECTS else (2, 4)

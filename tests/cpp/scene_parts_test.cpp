@@ -5,6 +5,7 @@
 #include "alignment/icp_refinement.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
+#include "alignment/scene_preparation.hpp"
 #include "test_support.hpp"
 
 #include <spectral_vs/rotation/so3.hpp>
@@ -213,8 +214,9 @@ TEST(SupportPlane, FindsTheTableAndTheSideTheObjectsAreOn) {
   const auto plane = support_plane(scene, 0.008, 0.4);
   ASSERT_TRUE(plane);
   EXPECT_NEAR(plane->normal.z(), 1.0, 1e-9);
-  EXPECT_NEAR(plane->offset, 0.02, 0.008);  // within a voxel bin
-  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4).size(), std::size_t(top.points().rows()));
+  EXPECT_NEAR(plane->offset, 0.02, 1e-12);  // the median of the table's points, not a bin's edge
+  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4, 0.012).size(),
+            std::size_t(top.points().rows()));
   // Seen from below (normals and the box flipped), the plane's normal turns too.
   Points flipped = -points;
   const auto below = support_plane(PointCloud(flipped, -normals), 0.008, 0.4);
@@ -475,6 +477,53 @@ TEST(Fitness, IsTheShareOfModelVoxelsWithAgreeingSceneNormalsNearby) {
   EXPECT_LT(scores[2], scores[0]);  // turned: the box's faces no longer agree
   EXPECT_LT(scores[3], 0.5);        // mostly outside the scene's grid
   EXPECT_EQ(around.fitness(Points(0, 3), Points(0, 3)), 0.0);
+}
+
+// Points on the six faces of an axis-aligned box of the given sizes, centred at the origin.
+Points box_surface(const Eigen::Vector3d& size, double step) {
+  std::vector<Eigen::Vector3d> points;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    for (double a = -size(u) / 2; a <= size(u) / 2; a += step)
+      for (double b = -size(v) / 2; b <= size(v) / 2; b += step)
+        for (const double side : {-0.5, 0.5}) {
+          Eigen::Vector3d p;
+          p(axis) = side * size(axis);
+          p(u) = a;
+          p(v) = b;
+          points.push_back(p);
+        }
+  }
+  Points out(Eigen::Index(points.size()), 3);
+  for (std::size_t i = 0; i < points.size(); ++i) out.row(Eigen::Index(i)) = points[i];
+  return out;
+}
+
+TEST(SupportPlane, ItsBandStaysUnderAThinModel) {
+  // 1.5 voxels for a model thicker than 4 of them; 0.4 of a plate's 9 mm, but no less
+  // than half a voxel; the thinnest axis found whatever the box's orientation.
+  EXPECT_NEAR(support_band(box_surface({0.10, 0.08, 0.06}, 0.002), 0.008), 0.012, 1e-12);
+  EXPECT_NEAR(support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.004), 0.0036, 1e-5);
+  EXPECT_NEAR(support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.008), 0.004, 1e-12);
+  const Eigen::Matrix3d R = exp_so3(Eigen::Vector3d(0.3, -0.5, 0.9));
+  const Points turned = box_surface({0.009, 0.12, 0.09}, 0.002) * R.transpose();
+  EXPECT_NEAR(support_band(turned, 0.004), 0.0036, 1e-5);
+}
+
+TEST(SupportPlane, APlateLyingOnTheTableIsNotTakenForIt) {
+  // A 9 mm plate and a 0.1 m box on the table at z = 0.02: the plate's top face is 9 mm
+  // above the plane, inside the 1.5-voxel band at 8 mm voxels, outside the plate's own.
+  const PointCloud table = patch(0.0, 0.0, 0.02, 0.35, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud plate = patch(-0.1, -0.1, 0.029, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud box = patch(0.1, 0.1, 0.12, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  Points points(table.points().rows() + 2 * box.points().rows(), 3), normals(points.rows(), 3);
+  points << table.points(), plate.points(), box.points();
+  normals << table.normals(), plate.normals(), box.normals();
+  const PointCloud scene(points, normals);
+  const auto objects = std::size_t(box.points().rows());
+  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4, 0.012).size(), objects);
+  const double band = support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.008);
+  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4, band).size(), 2 * objects);
 }
 
 }  // namespace

@@ -34,10 +34,12 @@ struct Prepared {
            const ScoredModel& moving)
       // Beyond the paper: a table under the objects dominates both the scene's EGI and its
       // voxel grid; searched without it, the object stands out. Fitness still sees it.
-      : plane(params.search.global_search && params.scene.suppress_support_plane
+      : band(support_band(model.points(), params.scene.voxel_size)),
+        plane(params.search.global_search && params.scene.suppress_support_plane
                   ? support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach())
                   : std::nullopt),
-        searched(plane ? without_support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach())
+        searched(plane ? without_support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach(),
+                                               band)
                        : scene),
         scene_map(searched, scene, params.scene.voxel_size, params.limits),
         model_coefficients(
@@ -62,6 +64,7 @@ struct Prepared {
                    dense_model, viewpoint};
   }
 
+  const double band;  // of the support plane, metres
   const std::optional<SupportPlane> plane;
   const PointCloud searched;
   const SceneMap scene_map;
@@ -110,7 +113,7 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
   std::vector<std::vector<Eigen::Index>> parts;
   if (prepared.plane) {
     parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(),
-                         params.scene.voxel_size);
+                         params.scene.voxel_size, prepared.band);
     keep_parts_near_guess(problem, prepared.searched, parts);
   } else if (prepared.view) {
     parts.push_back(whole_view(prepared.searched));

@@ -381,16 +381,28 @@ std::optional<SupportPlane> support_plane(const PointCloud& scene, double voxel_
   const std::optional<DominantPlane> plane =
       dominant_plane(scene, support_plane_params(voxel_size));
   if (!plane || plane->count == scene.size() || plane->extent < min_extent) return std::nullopt;
-  return SupportPlane{plane->normal, plane->offset};
+  // The vote's offset is a bin's edge, up to half a voxel off: the median of its points'
+  // offsets is the plane's, so that a band under a thin object's height (support_band)
+  // still holds the plane.
+  const std::vector<char> on = plane_members(scene, *plane, support_plane_params(voxel_size));
+  std::vector<double> offsets;
+  for (Eigen::Index i = 0; i < scene.points().rows(); ++i)
+    if (on[std::size_t(i)]) offsets.push_back(scene.points().row(i).dot(plane->normal));
+  const auto middle = offsets.begin() + std::ptrdiff_t(offsets.size() / 2);
+  std::nth_element(offsets.begin(), middle, offsets.end());
+  return SupportPlane{plane->normal, *middle};
 }
 
-PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent) {
+PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent,
+                                 double band) {
   const std::optional<SupportPlane> plane = support_plane(scene, voxel_size, min_extent);
   if (!plane) return scene;
   DominantPlane found;
   found.normal = plane->normal;
   found.offset = plane->offset;
-  const std::vector<char> on = plane_members(scene, found, support_plane_params(voxel_size));
+  PlaneDetectionParams members = support_plane_params(voxel_size);
+  members.band = band;
+  const std::vector<char> on = plane_members(scene, found, members);
   const auto kept = Eigen::Index(std::count(on.begin(), on.end(), 0));
   Points kept_points(kept, 3), kept_normals(kept, 3);
   Eigen::Index row = 0;

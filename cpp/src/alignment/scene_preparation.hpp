@@ -14,12 +14,17 @@
 
 namespace spectral_vs::detail {
 
-/// The connected parts of `searched` (above the support plane, when there is one) that
-/// could be the object: sizes between a quarter of the model's reach and two of its
-/// diameters, at most a few, largest first; a view cut in parts also as a whole.
+/// How far above the support plane the plane's band reaches, metres: what lies within it
+/// is taken for the plane (without_support_plane) and kept out of the parts. 1.5 voxels
+/// (the tilted normals at the objects' feet), but under the thickness of a thin model.
+double support_band(const Points& model_points, double voxel_size);
+
+/// The connected parts of `searched` (more than `band` above the support plane, when there
+/// is one) that could be the object: sizes between a quarter of the model's reach and two
+/// of its diameters, at most a few, largest first; a view cut in parts also as a whole.
 std::vector<std::vector<Eigen::Index>> object_parts(const PointCloud& searched,
                                                     const std::optional<SupportPlane>& plane,
-                                                    double reach, double voxel_size);
+                                                    double reach, double voxel_size, double band);
 
 /// The whole of a single view as the one part (no support plane to cut it).
 std::vector<Eigen::Index> whole_view(const PointCloud& searched);
