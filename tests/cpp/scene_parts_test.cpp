@@ -215,7 +215,7 @@ TEST(SupportPlane, FindsTheTableAndTheSideTheObjectsAreOn) {
   ASSERT_TRUE(plane);
   EXPECT_NEAR(plane->normal.z(), 1.0, 1e-9);
   EXPECT_NEAR(plane->offset, 0.02, 1e-12);  // the median of the table's points, not a bin's edge
-  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4, 0.012).size(),
+  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, 0.012).size(),
             std::size_t(top.points().rows()));
   // Seen from below (normals and the box flipped), the plane's normal turns too.
   Points flipped = -points;
@@ -521,9 +521,12 @@ TEST(SupportPlane, APlateLyingOnTheTableIsNotTakenForIt) {
   normals << table.normals(), plate.normals(), box.normals();
   const PointCloud scene(points, normals);
   const auto objects = std::size_t(box.points().rows());
-  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4, 0.012).size(), objects);
+  const auto plane = support_plane(scene, 0.008, 0.4);
+  ASSERT_TRUE(plane);
+  EXPECT_NEAR(plane->offset, 0.02, 1e-12);
+  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, 0.012).size(), objects);
   const double band = support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.008);
-  EXPECT_EQ(without_support_plane(scene, 0.008, 0.4, band).size(), 2 * objects);
+  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, band).size(), 2 * objects);
 }
 
 }  // namespace

@@ -38,8 +38,7 @@ struct Prepared {
         plane(params.search.global_search && params.scene.suppress_support_plane
                   ? support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach())
                   : std::nullopt),
-        searched(plane ? without_support_plane(scene, params.scene.voxel_size, 4.0 * moving.reach(),
-                                               band)
+        searched(plane ? without_support_plane(scene, *plane, params.scene.voxel_size, band)
                        : scene),
         scene_map(searched, scene, params.scene.voxel_size, params.limits),
         model_coefficients(

@@ -393,13 +393,11 @@ std::optional<SupportPlane> support_plane(const PointCloud& scene, double voxel_
   return SupportPlane{plane->normal, *middle};
 }
 
-PointCloud without_support_plane(const PointCloud& scene, double voxel_size, double min_extent,
-                                 double band) {
-  const std::optional<SupportPlane> plane = support_plane(scene, voxel_size, min_extent);
-  if (!plane) return scene;
+PointCloud without_support_plane(const PointCloud& scene, const SupportPlane& plane,
+                                 double voxel_size, double band) {
   DominantPlane found;
-  found.normal = plane->normal;
-  found.offset = plane->offset;
+  found.normal = plane.normal;
+  found.offset = plane.offset;
   PlaneDetectionParams members = support_plane_params(voxel_size);
   members.band = band;
   const std::vector<char> on = plane_members(scene, found, members);
