@@ -6,7 +6,8 @@ band the support plane once took for its own. Per (angle, case) cell, one clutte
 defaults, one thread; success within 5 degrees and 10 mm of the truth up to the plate's
 half turns. A tuning-side measurement: the plate is cut from a tuning object's mesh, and
 nothing here looks at the held-out objects. Writes benchmarks/results/thin_objects.json
-and the table in docs/experiments.md. Usage (2 cores shared: one thread, niced)::
+and the table in docs/experiments.md (another ``--output`` leaves the docs alone). Usage
+(2 cores shared: one thread, niced)::
 
     OMP_NUM_THREADS=1 nice -n 10 python benchmarks/thin_objects.py [--cases-per-cell 6]
 """
@@ -14,17 +15,18 @@ and the table in docs/experiments.md. Usage (2 cores shared: one thread, niced):
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
 import cases as case_lib
 import numpy as np
+import report as report_lib
 from report import RESULTS, commit, machine, replace_block
 
 import spectral_vs as svs
 
 EXPERIMENTS_DOC = Path(__file__).resolve().parents[1] / "docs" / "experiments.md"
+DEFAULT_OUTPUT = RESULTS / "thin_objects.json"
 ANGLES = (10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0)
 
 
@@ -61,11 +63,19 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def report(results: dict) -> None:
+    block = (
+        f"Commit `{results['commit']}`, {results['machine']}; `OMP_NUM_THREADS=1 nice -n 10 "
+        f"python benchmarks/thin_objects.py` (the plate among 3-5 tuning objects, defaults, "
+        f"one thread).\n\n{table(results['records'])}"
+    )
+    replace_block(EXPERIMENTS_DOC, "thin-objects", block)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases-per-cell", type=int, default=6)
-    parser.add_argument("--output", type=Path, default=RESULTS / "thin_objects.json")
-    parser.add_argument("--no-docs", action="store_true", help="do not rewrite the docs table")
+    parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     args = parser.parse_args()
     rows = []
     for angle in ANGLES:
@@ -77,18 +87,9 @@ def main() -> None:
                 f"{r['translation_error_mm']:6.1f} mm  confidence {r['confidence']:.2f}",
                 flush=True,
             )
-    text = table(rows)
-    print(text)
-    args.output.parent.mkdir(exist_ok=True)
-    record = {"machine": machine(), "commit": commit(), "rows": rows}
-    args.output.write_text(json.dumps(record, indent=2) + "\n")
-    if not args.no_docs:
-        block = (
-            f"Commit `{commit()}`, {machine()}; `OMP_NUM_THREADS=1 nice -n 10 python "
-            f"benchmarks/thin_objects.py` (the plate among 3-5 tuning objects, defaults, one "
-            f"thread).\n\n{text}"
-        )
-        replace_block(EXPERIMENTS_DOC, "thin-objects", block)
+    print(table(rows))
+    results = {"machine": machine(), "commit": commit(), "records": rows}
+    report_lib.write_results(results, args.output, DEFAULT_OUTPUT, report)
 
 
 if __name__ == "__main__":

@@ -323,6 +323,18 @@ def test_part_search_finds_the_target_in_clutter():
     assert successes >= 13
 
 
+def _assert_clutter_aligned(cells: list[tuple[str, float, int]]) -> None:
+    """Each (object, angle, index) clutter case of the benchmark, in its camera's frame,
+    aligned with the defaults within 5 degrees and 10 mm of the truth."""
+    cases = _benchmark_cases()
+    for name, angle, index in cells:
+        spec = cases.CaseSpec("clutter", name, angle, index)
+        case = cases.in_camera_frame(cases.make_case(spec))
+        result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1)
+        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
+        assert rotation_deg < 5.0 and translation_m < 0.010, spec
+
+
 def test_each_part_gets_distinct_rotations():
     """Neighbouring maxima of a part's SO(3) search often climb to one peak of the EGI
     correlation; placing each spent the part's share of hypotheses on one rotation. Now a
@@ -331,15 +343,7 @@ def test_each_part_gets_distinct_rotations():
     cases that this turned into successes (measured: the duck turned 90 degrees, off by
     135 degrees before; the bunny turned 150 degrees, 160 degrees and 178 mm off before),
     in their camera's frame with the defaults, within 5 degrees and 10 mm."""
-    cases = _benchmark_cases()
-    for spec in (
-        cases.CaseSpec("clutter", "duck", 90.0, 10),
-        cases.CaseSpec("clutter", "bunny", 150.0, 2),
-    ):
-        case = cases.in_camera_frame(cases.make_case(spec))
-        result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1)
-        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
-        assert rotation_deg < 5.0 and translation_m < 0.010, spec
+    _assert_clutter_aligned([("duck", 90.0, 10), ("bunny", 150.0, 2)])
 
 
 def test_clutter_rotations_are_screened_by_fitness():
@@ -350,15 +354,7 @@ def test_clutter_rotations_are_screened_by_fitness():
     28 and 38, turned 120 degrees) that this turned into successes (measured before: the
     duck 178 degrees and 43 mm off, the bunny 177 degrees and 143 mm off, both on another
     object), in their camera's frame with the defaults, within 5 degrees and 10 mm."""
-    cases = _benchmark_cases()
-    for spec in (
-        cases.CaseSpec("clutter", "duck", 120.0, 28),
-        cases.CaseSpec("clutter", "bunny", 120.0, 38),
-    ):
-        case = cases.in_camera_frame(cases.make_case(spec))
-        result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1)
-        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
-        assert rotation_deg < 5.0 and translation_m < 0.010, spec
+    _assert_clutter_aligned([("duck", 120.0, 28), ("bunny", 120.0, 38)])
 
 
 def test_a_plate_lying_on_the_table_is_not_taken_for_it():
@@ -368,15 +364,7 @@ def test_a_plate_lying_on_the_table_is_not_taken_for_it():
     stays under 0.4 of the model's thickness. Two cluttered tables measured off by 107
     degrees / 167 mm and 102 degrees / 164 mm before (benchmarks/thin_objects.py, 15 of 42
     right before, 42 after), now within 5 degrees and 10 mm up to the plate's half turns."""
-    cases = _benchmark_cases()
-    for spec in (
-        cases.CaseSpec("clutter", "plate", 60.0, 1),
-        cases.CaseSpec("clutter", "plate", 10.0, 5),
-    ):
-        case = cases.in_camera_frame(cases.make_case(spec))
-        result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1)
-        rotation_deg, translation_m = cases.pose_error(case, np.asarray(result.T_scene_model))
-        assert rotation_deg < 5.0 and translation_m < 0.010, spec
+    _assert_clutter_aligned([("plate", 60.0, 1), ("plate", 10.0, 5)])
 
 
 def test_icp_refinement_tightens_the_spectral_result():

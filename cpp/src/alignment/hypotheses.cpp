@@ -54,8 +54,7 @@ constexpr int kScreenedPerPlaced = 4;
 
 // Turn between two rotations, degrees.
 double turn_deg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-  const double c = std::clamp(0.5 * ((a.transpose() * b).trace() - 1.0), -1.0, 1.0);
-  return std::acos(c) * 180.0 / M_PI;
+  return rotation_distance(a, b) * 180.0 / M_PI;
 }
 
 }  // namespace
