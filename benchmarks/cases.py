@@ -358,15 +358,28 @@ HELDOUT_OBJECTS: dict[str, ObjectSpec] = {
 
 
 #: Thin tuning-side objects, outside the benchmark's cycles (FAMILY_OBJECTS): measured
-#: in clutter among the tuning objects by benchmarks/thin_objects.py. The plate is the
-#: jenga mesh (a tuning object's) cut to 120 x 90 x 9 mm; lying on the table, its top
-#: face is within 1.5 voxels of the table (docs/experiments.md, "Thin objects").
+#: in clutter among the tuning objects by benchmarks/thin_objects.py. Each is the jenga
+#: mesh (a tuning object's) cut to a flat box. The plate, lying on the table, has its top
+#: face within 1.5 voxels of the table; the tile and the slab show one large face, which
+#: fits on other objects' faces as well (docs/experiments.md, "Thin objects").
 THIN_OBJECTS: dict[str, ObjectSpec] = {
     "plate": ObjectSpec(
         "jenga/jenga.obj",
         0.12,
         stretch=(0.12, 0.09, 0.009),
         symmetry=Symmetry(BOX_GROUP, "plate 120 x 90 x 9 mm: half turns about its 3 axes"),
+    ),
+    "tile": ObjectSpec(
+        "jenga/jenga.obj",
+        0.08,
+        stretch=(0.08, 0.04, 0.01),
+        symmetry=Symmetry(BOX_GROUP, "tile 80 x 40 x 10 mm: half turns about its 3 axes"),
+    ),
+    "slab": ObjectSpec(
+        "jenga/jenga.obj",
+        0.11,
+        stretch=(0.11, 0.05, 0.014),
+        symmetry=Symmetry(BOX_GROUP, "slab 110 x 50 x 14 mm: half turns about its 3 axes"),
     ),
 }
 

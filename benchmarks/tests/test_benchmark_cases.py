@@ -141,19 +141,22 @@ def is_symmetry(mesh: cases.Mesh, R: np.ndarray) -> bool:
     return bool(np.percentile(moved, 90) < 2 * MM and moved.max() < 5 * MM)
 
 
-@pytest.mark.parametrize("name", ["jenga", "lego", "blob000", "blob008", "plate"])
+@pytest.mark.parametrize("name", ["jenga", "lego", "blob000", "blob008", "plate", "tile", "slab"])
 def test_symmetries_map_the_object_onto_itself(name):
     mesh = cases.load_mesh(name)
     for R in cases.object_spec(name).symmetry.rotations[1:]:
         assert is_symmetry(mesh, R)
 
 
-def test_the_thin_plate_is_9_mm_thick_and_outside_the_benchmark_cycles():
-    mesh = cases.load_mesh("plate")
+@pytest.mark.parametrize(
+    ("name", "size_mm"), [("plate", (9, 90, 120)), ("tile", (10, 40, 80)), ("slab", (14, 50, 110))]
+)
+def test_the_thin_objects_have_their_sizes_and_are_outside_the_benchmark_cycles(name, size_mm):
+    mesh = cases.load_mesh(name)
     extent = np.sort(mesh.vertices.max(0) - mesh.vertices.min(0))
-    np.testing.assert_allclose(extent, [0.009, 0.09, 0.12], atol=0.1 * MM)
+    np.testing.assert_allclose(extent, np.array(size_mm) * MM, atol=0.1 * MM)
     for family, objects in cases.FAMILY_OBJECTS.items():
-        assert "plate" not in objects, family
+        assert name not in objects, family
 
 
 @pytest.mark.parametrize("name", ["mug", "blob004", "bunny"])
