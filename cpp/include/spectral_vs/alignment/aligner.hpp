@@ -174,7 +174,7 @@ struct VerificationParams {
   /// Below 1, an alternative at least as confident as the refined pose with more inliers
   /// is returned too (the one with the most): a flat box whose hidden faces sit inside
   /// another object is as confident as the box lying on the table, whose underside only
-  /// the table supports (tuning thin objects in clutter 105 to 120 of 126, 1120 other
+  /// the table supports (tuning thin objects in clutter 105 to 120 of 126, 840 other
   /// tuning cases 4 gained and none lost, docs/experiments.md "Thin objects").
   double reselect_margin = 0.1;
 };
