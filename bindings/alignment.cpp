@@ -239,8 +239,9 @@ max_alternatives : int
 reselect_margin : float
     With global search and alternatives: an alternative more confident than the refined
     pose by more than this is returned instead (``stop_reason`` ``'reselected'``), in
-    [0, 1] (default 0.1; 1 never reselects). Below 1, so is an alternative at least as
-    confident with more inliers (the one with the most).
+    [0, 1] (default 0.1; 1 never reselects). Below 1, so is, in clutter, an alternative
+    within 0.01 as confident that explains a share of its object's part of the scene
+    larger by over 0.2, else one at least as confident with more inliers.
 )doc");
   define_settings(verification)
       .def_readwrite("verify", &VerificationParams::verify)
@@ -416,8 +417,8 @@ confidence : float
           "Why the run of the returned pose stopped: 'converged', 'max_iterations', "
           "'max_seconds', 'kept_start' (global search: Algorithm 1 ended less fit than "
           "the hypothesis it started from, whose pose was kept) or 'reselected' (global "
-          "search: an alternative more confident by over reselect_margin, or as confident with "
-          "more inliers, was returned).")
+          "search: an alternative more confident by over reselect_margin, or as confident and "
+          "explaining more of its object or with more inliers, was returned).")
       .def_readonly("iterations", &AlignResult::iterations,
                     "Iterations of the Algorithm 1 run that produced the returned pose: "
                     "len(history); 0 for 'kept_start' and 'reselected'.")

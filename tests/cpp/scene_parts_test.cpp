@@ -1,8 +1,9 @@
 // The aligner's internals: the range image that checks a pose against what a single
-// view saw, the connected parts of a cluttered scene, its support plane, the final
-// point-to-plane ICP, and the fitness of a pose.
+// view saw, the connected parts of a cluttered scene, its support plane, how much of a
+// part a pose explains, the final point-to-plane ICP, and the fitness of a pose.
 
 #include "alignment/icp_refinement.hpp"
+#include "alignment/part_coverage.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/scene_preparation.hpp"
@@ -527,6 +528,35 @@ TEST(SupportPlane, APlateLyingOnTheTableIsNotTakenForIt) {
   EXPECT_EQ(without_support_plane(scene, *plane, 0.008, 0.012).size(), objects);
   const double band = support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.008);
   EXPECT_EQ(without_support_plane(scene, *plane, 0.008, band).size(), 2 * objects);
+}
+
+TEST(PartCoverage, IsTheShareOfItsPartThatAPoseExplains) {
+  // On a table at z = 0: a tile's top face (40 mm square, 9 x 9 points 5 mm apart) 10 mm
+  // up and a box's top face (100 mm square, 21 x 21 points) 60 mm up. The model is the
+  // tile's face. On the tile it explains all 81 of its points; centred on the box it
+  // explains the box's points within a voxel (8 mm) of its square, 11 x 11 of 441.
+  const PointCloud table = patch(0.0, 0.0, 0.0, 0.35, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud tile = patch(-0.15, -0.15, 0.01, 0.02, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud box = patch(0.15, 0.15, 0.06, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  Points points(table.points().rows() + tile.points().rows() + box.points().rows(), 3);
+  Points normals(points.rows(), 3);
+  points << table.points(), tile.points(), box.points();
+  normals << table.normals(), tile.normals(), box.normals();
+  const PointCloud scene(points, normals);
+  const PointCloud model = patch(0.0, 0.0, 0.0, 0.02, 0.005, Eigen::Vector3d::UnitZ());
+  const SupportPlane plane{Eigen::Vector3d::UnitZ(), 0.0};
+  const PartCoverage coverage(scene, plane, 0.004, 0.008);
+  const auto at = [](double x, double y, double z) {
+    Transform T = Transform::Identity();
+    T.topRightCorner<3, 1>() = Eigen::Vector3d(x, y, z);
+    return T;
+  };
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.15, -0.15, 0.01)), 1.0);
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.15, 0.15, 0.06)), 121.0 / 441.0);
+  // 20 mm off the tile: 6 of its 9 columns. Away from both, or on the table alone: none.
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.13, -0.15, 0.01)), 54.0 / 81.0);
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.3)), 0.0);
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.0)), 0.0);
 }
 
 }  // namespace

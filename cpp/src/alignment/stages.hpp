@@ -7,7 +7,9 @@
 //                      the ICP;
 //   verifier           the one score of a pose (fitness, confidence, inliers);
 //   alternatives       the other poses the scene supports about as well;
-//   reselect           an alternative far more confident than the pose replaces it.
+//   reselect           an alternative replaces the pose: one far more confident, one
+//                      that explains its object's part whole (part_coverage), or one
+//                      as confident with more inliers.
 
 #include <spectral_vs/alignment/aligner.hpp>
 

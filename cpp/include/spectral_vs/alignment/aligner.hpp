@@ -171,11 +171,14 @@ struct VerificationParams {
   /// the fitness that ranks the refinements (ROC AUC 0.997 against 0.974 on the tuning
   /// families); 0.1 gained 5 of 280 tuning single views and clutter scenes (258 to 263:
   /// margins 0.03-0.05 gained 4, 0 lost 14, 0.15 gained 4), docs/experiments.md.
-  /// Below 1, an alternative at least as confident as the refined pose with more inliers
-  /// is returned too (the one with the most): a flat box whose hidden faces sit inside
-  /// another object is as confident as the box lying on the table, whose underside only
-  /// the table supports (tuning thin objects in clutter 105 to 120 of 126, 840 other
-  /// tuning cases 4 gained and none lost, docs/experiments.md "Thin objects").
+  /// Below 1, two more rules return an alternative, for a flat box whose hidden faces sit
+  /// inside another object, as confident as the box lying on the table: in clutter, one
+  /// within 0.01 of the refined pose's confidence that explains a share of its object's
+  /// part of the scene larger by over 0.2 (the box explains its own part whole, not
+  /// another object's); else one at least as confident with more inliers (the table
+  /// supports the box's underside), the one with the most. Tuning thin objects in
+  /// clutter 105 to 123 of 126, 840 other tuning cases 4 gained and none lost
+  /// (docs/experiments.md "Thin objects").
   double reselect_margin = 0.1;
 };
 
