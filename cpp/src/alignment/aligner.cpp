@@ -287,8 +287,10 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
     find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
+    // The parts are cut only when there is an alternative to weigh (a few percent of a
+    // cluttered alignment's time otherwise).
     std::optional<PartCoverage> coverage;
-    if (prepared.plane)
+    if (prepared.plane && !best.alternatives.empty())
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
     if (reselect(problem, prepared, model, coverage, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
