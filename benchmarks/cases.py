@@ -362,25 +362,21 @@ HELDOUT_OBJECTS: dict[str, ObjectSpec] = {
 #: mesh (a tuning object's) cut to a flat box. The plate, lying on the table, has its top
 #: face within 1.5 voxels of the table; the tile and the slab show one large face, which
 #: fits on other objects' faces as well (docs/experiments.md, "Thin objects").
+def _jenga_cut(kind: str, length_mm: int, width_mm: int, thickness_mm: int) -> ObjectSpec:
+    """The jenga mesh cut to a flat box of the given size, with the box's half turns."""
+    size = (length_mm / 1000, width_mm / 1000, thickness_mm / 1000)
+    description = (
+        f"{kind} {length_mm} x {width_mm} x {thickness_mm} mm: half turns about its 3 axes"
+    )
+    return ObjectSpec(
+        "jenga/jenga.obj", size[0], stretch=size, symmetry=Symmetry(BOX_GROUP, description)
+    )
+
+
 THIN_OBJECTS: dict[str, ObjectSpec] = {
-    "plate": ObjectSpec(
-        "jenga/jenga.obj",
-        0.12,
-        stretch=(0.12, 0.09, 0.009),
-        symmetry=Symmetry(BOX_GROUP, "plate 120 x 90 x 9 mm: half turns about its 3 axes"),
-    ),
-    "tile": ObjectSpec(
-        "jenga/jenga.obj",
-        0.08,
-        stretch=(0.08, 0.04, 0.01),
-        symmetry=Symmetry(BOX_GROUP, "tile 80 x 40 x 10 mm: half turns about its 3 axes"),
-    ),
-    "slab": ObjectSpec(
-        "jenga/jenga.obj",
-        0.11,
-        stretch=(0.11, 0.05, 0.014),
-        symmetry=Symmetry(BOX_GROUP, "slab 110 x 50 x 14 mm: half turns about its 3 axes"),
-    ),
+    "plate": _jenga_cut("plate", 120, 90, 9),
+    "tile": _jenga_cut("tile", 80, 40, 10),
+    "slab": _jenga_cut("slab", 110, 50, 14),
 }
 
 

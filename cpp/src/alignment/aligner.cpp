@@ -241,7 +241,7 @@ bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& mode
       replacement(best, problem.params.verification.reselect_margin, model, coverage);
   if (!replacing) return false;
   // Verified by the same verifier as the refined pose: its figures are the pose's.
-  const AlignAlternative chosen = *replacing;
+  const AlignAlternative& chosen = *replacing;
   best.T_scene_model = chosen.T_scene_model;
   best.confidence = chosen.confidence;
   best.inliers = chosen.inliers;

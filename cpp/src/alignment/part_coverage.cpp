@@ -2,21 +2,15 @@
 
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
+#include "alignment/scene_preparation.hpp"
 
 #include <algorithm>
-#include <cstdlib>
 
 namespace spectral_vs::detail {
 
-// As object_parts joins points into parts (scene_preparation.cpp).
-constexpr double kPartTolerance = 0.75;
-
 PartCoverage::PartCoverage(const PointCloud& searched, const SupportPlane& plane, double band,
                            double voxel_size)
-    : searched_(searched), voxel_size_(voxel_size) {
-  for (Eigen::Index i = 0; i < searched.points().rows(); ++i) {
-    if (searched.points().row(i).dot(plane.normal) - plane.offset > band) above_.push_back(i);
-  }
+    : searched_(searched), voxel_size_(voxel_size), above_(rows_above(searched, plane, band)) {
   part_of_.assign(above_.size(), -1);
   const auto parts =
       connected_parts(rows_of(searched.points(), above_), kPartTolerance * voxel_size);

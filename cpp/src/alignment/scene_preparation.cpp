@@ -14,9 +14,6 @@ namespace detail {
 // shows: at least kPartMinPoints points, no smaller than a quarter of the model's reach
 // and no larger than two of its diameters (two objects touching).
 constexpr std::size_t kPartMinPoints = 30;
-// Points this many voxels apart are in one part: the scene comes downsampled to half a
-// voxel, and objects a few millimetres apart stay apart.
-constexpr double kPartTolerance = 0.75;
 constexpr std::size_t kMaxParts = 8;
 
 // The support plane's band: kPlaneBand voxels, or kThinBand of the model's thickness
@@ -40,9 +37,8 @@ double support_band(const Points& model_points, double voxel_size) {
   return std::clamp(kThinBand * thickness, kMinPlaneBand * voxel_size, kPlaneBand * voxel_size);
 }
 
-std::vector<std::vector<Eigen::Index>> object_parts(
-    const PointCloud& searched, const std::optional<detail::SupportPlane>& plane, double reach,
-    double voxel_size, double band) {
+std::vector<Eigen::Index> rows_above(const PointCloud& searched,
+                                     const std::optional<SupportPlane>& plane, double band) {
   // Without the points near the plane (their normals tilted at the objects' feet) that
   // would join every object into one part, or below it.
   std::vector<Eigen::Index> above;
@@ -50,6 +46,13 @@ std::vector<std::vector<Eigen::Index>> object_parts(
     if (!plane || searched.points().row(i).dot(plane->normal) - plane->offset > band)
       above.push_back(i);
   }
+  return above;
+}
+
+std::vector<std::vector<Eigen::Index>> object_parts(
+    const PointCloud& searched, const std::optional<detail::SupportPlane>& plane, double reach,
+    double voxel_size, double band) {
+  std::vector<Eigen::Index> above = rows_above(searched, plane, band);
   const Points points = detail::rows_of(searched.points(), above);
   const auto plausible = [&](const std::vector<Eigen::Index>& part) {
     Eigen::AlignedBox3d box;

@@ -19,6 +19,14 @@ namespace spectral_vs::detail {
 /// (the tilted normals at the objects' feet), but under the thickness of a thin model.
 double support_band(const Points& model_points, double voxel_size);
 
+/// Points this many voxels apart are in one part: the scene comes downsampled to half a
+/// voxel, and objects a few millimetres apart stay apart.
+inline constexpr double kPartTolerance = 0.75;
+
+/// The rows of `searched` more than `band` above the support plane (all without one).
+std::vector<Eigen::Index> rows_above(const PointCloud& searched,
+                                     const std::optional<SupportPlane>& plane, double band);
+
 /// The connected parts of `searched` (more than `band` above the support plane, when there
 /// is one) that could be the object: sizes between a quarter of the model's reach and two
 /// of its diameters, at most a few, largest first; a view cut in parts also as a whole.
