@@ -361,15 +361,24 @@ HELDOUT_OBJECTS: dict[str, ObjectSpec] = {
 #: in clutter among the tuning objects by benchmarks/thin_objects.py. Each is the jenga
 #: mesh (a tuning object's) cut to a flat box. The plate, lying on the table, has its top
 #: face within 1.5 voxels of the table; the tile and the slab show one large face, which
-#: fits on other objects' faces as well (docs/experiments.md, "Thin objects").
-def _jenga_cut(kind: str, length_mm: int, width_mm: int, thickness_mm: int) -> ObjectSpec:
-    """The jenga mesh cut to a flat box of the given size, with the box's half turns."""
+#: fits on other objects' faces as well; the fin, the panel and the wall stand on an edge
+#: or an end, and a view from above shows little more than that edge, its normals blurred
+#: by the depth edges (docs/experiments.md, "Thin objects").
+def _jenga_cut(
+    kind: str,
+    length_mm: int,
+    width_mm: int,
+    thickness_mm: int,
+    up: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> ObjectSpec:
+    """The jenga mesh cut to a flat box of the given size, turned by ``up``, with the box's
+    half turns."""
     size = (length_mm / 1000, width_mm / 1000, thickness_mm / 1000)
     description = (
         f"{kind} {length_mm} x {width_mm} x {thickness_mm} mm: half turns about its 3 axes"
     )
     return ObjectSpec(
-        "jenga/jenga.obj", size[0], stretch=size, symmetry=Symmetry(BOX_GROUP, description)
+        "jenga/jenga.obj", size[0], up=up, stretch=size, symmetry=Symmetry(BOX_GROUP, description)
     )
 
 
@@ -377,6 +386,10 @@ THIN_OBJECTS: dict[str, ObjectSpec] = {
     "plate": _jenga_cut("plate", 120, 90, 9),
     "tile": _jenga_cut("tile", 80, 40, 10),
     "slab": _jenga_cut("slab", 110, 50, 14),
+    # Standing: the fin on its 40 x 15 mm end, the panel and the wall on a long edge.
+    "fin": _jenga_cut("fin", 120, 40, 15, up=(0.0, HALF_PI, 0.0)),
+    "panel": _jenga_cut("panel", 90, 60, 10, up=(HALF_PI, 0.0, 0.0)),
+    "wall": _jenga_cut("wall", 130, 70, 12, up=(HALF_PI, 0.0, 0.0)),
 }
 
 

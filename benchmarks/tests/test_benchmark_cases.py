@@ -141,7 +141,10 @@ def is_symmetry(mesh: cases.Mesh, R: np.ndarray) -> bool:
     return bool(np.percentile(moved, 90) < 2 * MM and moved.max() < 5 * MM)
 
 
-@pytest.mark.parametrize("name", ["jenga", "lego", "blob000", "blob008", "plate", "tile", "slab"])
+@pytest.mark.parametrize(
+    "name",
+    ["jenga", "lego", "blob000", "blob008", "plate", "tile", "slab", "fin", "panel", "wall"],
+)
 def test_symmetries_map_the_object_onto_itself(name):
     mesh = cases.load_mesh(name)
     for R in cases.object_spec(name).symmetry.rotations[1:]:
@@ -149,7 +152,15 @@ def test_symmetries_map_the_object_onto_itself(name):
 
 
 @pytest.mark.parametrize(
-    ("name", "size_mm"), [("plate", (9, 90, 120)), ("tile", (10, 40, 80)), ("slab", (14, 50, 110))]
+    ("name", "size_mm"),
+    [
+        ("plate", (9, 90, 120)),
+        ("tile", (10, 40, 80)),
+        ("slab", (14, 50, 110)),
+        ("fin", (15, 40, 120)),
+        ("panel", (10, 60, 90)),
+        ("wall", (12, 70, 130)),
+    ],
 )
 def test_the_thin_objects_have_their_sizes_and_are_outside_the_benchmark_cycles(name, size_mm):
     mesh = cases.load_mesh(name)
@@ -157,6 +168,14 @@ def test_the_thin_objects_have_their_sizes_and_are_outside_the_benchmark_cycles(
     np.testing.assert_allclose(extent, np.array(size_mm) * MM, atol=0.1 * MM)
     for family, objects in cases.FAMILY_OBJECTS.items():
         assert name not in objects, family
+
+
+@pytest.mark.parametrize(("name", "height_mm"), [("fin", 120), ("panel", 60), ("wall", 70)])
+def test_the_standing_thin_objects_stand_on_an_edge_or_an_end(name, height_mm):
+    # In clutter an object keeps its model frame's up: its height is its z extent.
+    mesh = cases.load_mesh(name)
+    height = mesh.vertices[:, 2].max() - mesh.vertices[:, 2].min()
+    assert height == pytest.approx(height_mm * MM, abs=0.1 * MM)
 
 
 @pytest.mark.parametrize("name", ["mug", "blob004", "bunny"])

@@ -1,10 +1,12 @@
 // The aligner's internals: the range image that checks a pose against what a single
 // view saw, the connected parts of a cluttered scene, its support plane, how much of a
-// part a pose explains, the final point-to-plane ICP, and the fitness of a pose.
+// part a pose explains, how a pose rests on the support plane, the final point-to-plane
+// ICP, and the fitness of a pose.
 
 #include "alignment/icp_refinement.hpp"
 #include "alignment/part_coverage.hpp"
 #include "alignment/range_image.hpp"
+#include "alignment/resting.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/scene_preparation.hpp"
 #include "test_support.hpp"
@@ -557,6 +559,97 @@ TEST(PartCoverage, IsTheShareOfItsPartThatAPoseExplains) {
   EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.13, -0.15, 0.01)), 54.0 / 81.0);
   EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.3)), 0.0);
   EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.0)), 0.0);
+}
+
+// A box's faces sampled every `step` metres, centred on the origin, outward normals.
+PointCloud box_cloud(const Eigen::Vector3d& size, double step) {
+  std::vector<Eigen::Vector3d> points, normals;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    for (double a = -size(u) / 2; a <= size(u) / 2 + 1e-12; a += step)
+      for (double b = -size(v) / 2; b <= size(v) / 2 + 1e-12; b += step)
+        for (const double side : {-1.0, 1.0}) {
+          Eigen::Vector3d p, n = Eigen::Vector3d::Zero();
+          p(axis) = 0.5 * side * size(axis);
+          p(u) = a;
+          p(v) = b;
+          n(axis) = side;
+          points.push_back(p);
+          normals.push_back(n);
+        }
+  }
+  Points p(Eigen::Index(points.size()), 3), n(p.rows(), 3);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    p.row(Eigen::Index(i)) = points[i].transpose();
+    n.row(Eigen::Index(i)) = normals[i].transpose();
+  }
+  return PointCloud(p, n);
+}
+
+Transform translation(double x, double y, double z) {
+  Transform T = Transform::Identity();
+  T.topRightCorner<3, 1>() = Eigen::Vector3d(x, y, z);
+  return T;
+}
+
+TEST(RestingFaces, AreABoxsSixFacesLargestFirst) {
+  const auto faces = resting_faces(box_cloud({0.10, 0.06, 0.02}, 0.002), 0.001);
+  ASSERT_EQ(faces.size(), 6u);
+  // The 100 x 60 mm faces first, then the 100 x 20 mm ones, then the 60 x 20 mm ones.
+  const std::array<int, 6> axes = {2, 2, 1, 1, 0, 0};
+  for (std::size_t k = 0; k < faces.size(); ++k) {
+    EXPECT_NEAR(std::abs(faces[k](axes[k])), 1.0, 1e-9) << k;
+    EXPECT_NEAR(faces[k].norm(), 1.0, 1e-12);
+  }
+  EXPECT_NEAR(faces[0].dot(faces[1]), -1.0, 1e-9);
+}
+
+TEST(RestingFaces, ASphereHasNone) {
+  // Within 1 mm of a supporting plane of a sphere of radius 50 mm lies a cap of
+  // 1 / 100 of its surface: under the 2% of a face.
+  const int n = 4000;
+  Points p(n, 3), normals(n, 3);
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - (2.0 * i + 1.0) / n, r = std::sqrt(1.0 - z * z);
+    const double phi = M_PI * (3.0 - std::sqrt(5.0)) * i;
+    normals.row(i) << r * std::cos(phi), r * std::sin(phi), z;
+    p.row(i) = 0.05 * normals.row(i);
+  }
+  EXPECT_TRUE(resting_faces(PointCloud(p, normals), 0.001).empty());
+}
+
+TEST(RestingRotations, PutTheFaceDownAndTurnEvenlyAboutUp) {
+  const Eigen::Vector3d face = Eigen::Vector3d(0.3, -0.4, 0.5).normalized();
+  const Eigen::Vector3d up = Eigen::Vector3d(0.1, 0.2, 1.0).normalized();
+  const auto rotations = resting_rotations(face, up, 24);
+  ASSERT_EQ(rotations.size(), 24u);
+  for (std::size_t k = 0; k < rotations.size(); ++k) {
+    EXPECT_NEAR((rotations[k] * face + up).norm(), 0.0, 1e-12) << k;
+    EXPECT_NEAR(rotations[k].determinant(), 1.0, 1e-12);
+    const Eigen::Matrix3d& next = rotations[(k + 1) % rotations.size()];
+    EXPECT_NEAR(rotation_distance(rotations[k], next) * 180.0 / M_PI, 15.0, 1e-9) << k;
+  }
+}
+
+TEST(RestingCheck, TellsAPoseOnTheTableOrAnObjectFromOneInsideOrUnderIt) {
+  // A table at z = 0 and a box's top face 30 mm up (100 mm square at x = y = 0.15). The
+  // model is a 40 x 40 x 10 mm slab; voxels of 6 mm (a gap of 9 mm).
+  const PointCloud table = patch(0.0, 0.0, 0.0, 0.35, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud box = patch(0.15, 0.15, 0.03, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  Points points(table.points().rows() + box.points().rows(), 3), normals(points.rows(), 3);
+  points << table.points(), box.points();
+  normals << table.normals(), box.normals();
+  const PointCloud scene(points, normals);
+  const RestingCheck check(scene, SupportPlane{Eigen::Vector3d::UnitZ(), 0.0}, 0.006);
+  const PointCloud slab = box_cloud({0.04, 0.04, 0.01}, 0.002);
+  EXPECT_TRUE(check.rests(slab, translation(-0.15, -0.15, 0.005)));  // on the table
+  EXPECT_TRUE(check.rests(slab, translation(-0.15, -0.15, 0.012)));  // 7 mm up: within 9
+  EXPECT_TRUE(check.rests(slab, translation(0.15, 0.15, 0.035)));    // on the box
+  // Its top face flush with the box's, the rest inside the box: 15 mm above the table,
+  // the box's face above its bottom.
+  EXPECT_FALSE(check.rests(slab, translation(0.15, 0.15, 0.025)));
+  EXPECT_FALSE(check.rests(slab, translation(-0.15, -0.15, 0.05)));   // 45 mm up, nothing under
+  EXPECT_FALSE(check.rests(slab, translation(-0.15, -0.15, -0.01)));  // sunk 15 mm into the table
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include "alignment/hypotheses.hpp"
 #include "alignment/part_coverage.hpp"
 #include "alignment/refinement.hpp"
+#include "alignment/resting.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/scene_preparation.hpp"
 #include "alignment/stages.hpp"
@@ -234,14 +235,10 @@ const AlignAlternative* replacement(const AlignResult& best, double margin, cons
   return chosen;
 }
 
-// Whether an alternative replaced the refined pose (replacement).
-bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
-              const std::optional<PartCoverage>& coverage, AlignResult& best) {
-  const AlignAlternative* replacing =
-      replacement(best, problem.params.verification.reselect_margin, model, coverage);
-  if (!replacing) return false;
+// `chosen` returned instead of the refined pose.
+void adopt(const Problem& problem, Prepared& prepared, const AlignAlternative& chosen,
+           AlignResult& best) {
   // Verified by the same verifier as the refined pose: its figures are the pose's.
-  const AlignAlternative& chosen = *replacing;
   best.T_scene_model = chosen.T_scene_model;
   best.confidence = chosen.confidence;
   best.inliers = chosen.inliers;
@@ -258,6 +255,68 @@ bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& mode
   best.hypothesis = -2;
   best.polish_evaluations = 0;
   best.icp_iterations = 0;
+}
+
+// Whether an alternative replaced the refined pose (replacement).
+bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
+              const std::optional<PartCoverage>& coverage, AlignResult& best) {
+  const AlignAlternative* replacing =
+      replacement(best, problem.params.verification.reselect_margin, model, coverage);
+  if (!replacing) return false;
+  adopt(problem, prepared, *replacing, best);
+  return true;
+}
+
+// In clutter, a returned pose that does not rest (RestingCheck: a flat model flush with a
+// face of a larger object, the rest of it inside that object with nothing under it) is
+// replaced by the most confident pose that rests, of the alternatives and of
+// kRestingPerPart resting poses per part of the scene (resting_poses), each refined by
+// the ICP, when that pose is at most kRestingMargin less confident. Chosen on tuning
+// thin objects in clutter, standing ones among them (benchmarks/thin_objects.py) and the
+// tuning clutter scenes: see docs/experiments.md, "Thin objects".
+constexpr int kRestingPerPart = 2;
+constexpr double kRestingMargin = 0.1;
+
+// The most confident resting pose of the candidates, refined by the ICP, if any rests.
+std::optional<AlignAlternative> most_confident_resting(const PointCloud& model,
+                                                       const Verifier& verifier,
+                                                       const RestingCheck& check,
+                                                       const std::vector<Transform>& candidates,
+                                                       const Prepared& prepared, double voxel) {
+  std::optional<AlignAlternative> resting;
+  for (const Transform& candidate : candidates) {
+    const Transform T = refine_by_icp(model, verifier, candidate, voxel, prepared.viewpoint);
+    if (!check.rests(model, T)) continue;
+    const PoseVerification v = verifier.verify(model, T);
+    if (resting && v.confidence <= resting->confidence) continue;
+    resting.emplace();
+    resting->T_scene_model = T;
+    resting->confidence = v.confidence;
+    resting->inliers = v.inliers;
+    resting->inlier_rmse = v.inlier_rmse;
+  }
+  return resting;
+}
+
+// Whether a resting pose replaced one that does not rest (kRestingMargin).
+bool rest_on_support(const Problem& problem, Prepared& prepared, const PointCloud& model,
+                     const Verifier& verifier, AlignResult& best) {
+  if (problem.params.verification.reselect_margin >= 1.0) return false;
+  const double voxel = problem.params.scene.voxel_size;
+  const RestingCheck check(prepared.searched, *prepared.plane, voxel);
+  if (check.rests(model, best.T_scene_model)) return false;
+  std::vector<Transform> candidates;
+  for (const AlignAlternative& alternative : best.alternatives)
+    candidates.push_back(alternative.T_scene_model);
+  const auto parts =
+      object_parts(prepared.searched, prepared.plane, problem.model.reach(), voxel, prepared.band);
+  for (const Transform& T :
+       resting_poses(problem, prepared.searched, parts, *prepared.plane, kRestingPerPart))
+    candidates.push_back(T);
+  const std::optional<AlignAlternative> resting =
+      most_confident_resting(model, verifier, check, candidates, prepared, voxel);
+  if (!resting || resting->confidence < best.confidence - kRestingMargin) return false;
+  adopt(problem, prepared, *resting, best);
   return true;
 }
 
@@ -293,6 +352,8 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
     if (prepared.plane && !best.alternatives.empty())
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
     if (reselect(problem, prepared, model, coverage, best))
+      find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
+    if (prepared.plane && rest_on_support(problem, prepared, model, verifier, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
   }
   return best;

@@ -80,17 +80,6 @@ Transform refine_translation(const PointCloud& model, const IcpScene& scene, Tra
   return T;
 }
 
-// The candidate refined as the returned pose was: point-to-plane ICP with pairs within a
-// voxel, then within kIcpFineDistance voxel.
-Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, const Transform& T,
-                        double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
-                        int max_iterations = IcpSettings{}.max_iterations) {
-  IcpSettings icp;
-  icp.viewpoint = viewpoint;
-  icp.max_iterations = max_iterations;
-  return refine_in_two_stages(model, verifier.fine_grid(), T, voxel_size, icp).T_scene_model;
-}
-
 // T_scene_model composed with the turn R of the model about its centroid c.
 Transform turned(const Transform& T, const Eigen::Matrix3d& R, const Eigen::Vector3d& c) {
   Transform A = Transform::Identity();
@@ -188,6 +177,15 @@ AlignAlternative alternative_of(const Candidate& candidate, const Transform& T,
 }
 
 }  // namespace
+
+Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, const Transform& T,
+                        double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
+                        int max_iterations) {
+  IcpSettings icp;
+  icp.viewpoint = viewpoint;
+  icp.max_iterations = max_iterations;
+  return refine_in_two_stages(model, verifier.fine_grid(), T, voxel_size, icp).T_scene_model;
+}
 
 std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coefficients,
                                               int bandwidth, int threads) {

@@ -5,6 +5,7 @@
 
 #include <spectral_vs/alignment/aligner.hpp>
 
+#include "alignment/icp_refinement.hpp"
 #include "alignment/verifier.hpp"
 
 #include <optional>
@@ -34,6 +35,12 @@ std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coeffi
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
                        const AlternativeSources& sources, const AlignParams& params,
                        const std::optional<Eigen::Vector3d>& viewpoint, AlignResult& result);
+
+/// A pose refined as the returned pose was: point-to-plane ICP with pairs within a
+/// voxel, then within kIcpFineDistance voxel (at most `max_iterations` steps each).
+Transform refine_by_icp(const PointCloud& model, const Verifier& verifier, const Transform& T,
+                        double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
+                        int max_iterations = IcpSettings{}.max_iterations);
 
 /// Rotation apart, degrees, and model centroid apart, metres: the success tolerances.
 inline constexpr double kApartDegrees = 5.0;
