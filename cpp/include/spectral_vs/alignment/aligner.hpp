@@ -178,7 +178,9 @@ struct VerificationParams {
   /// another object's); else one at least as confident with more inliers (the table
   /// supports the box's underside), the one with the most. Tuning thin objects in
   /// clutter 105 to 123 of 126, 840 other tuning cases 4 gained and none lost
-  /// (docs/experiments.md "Thin objects").
+  /// (docs/experiments.md "Thin objects"). Below 1 too, in clutter, a pose that rests
+  /// neither on the support plane nor on an upward-facing scene surface gives way to the
+  /// most confident pose that does, at most 0.1 less confident (docs/alignment.md).
   double reselect_margin = 0.1;
 };
 
