@@ -602,6 +602,11 @@ TEST(RestingFaces, AreABoxsSixFacesLargestFirst) {
     EXPECT_NEAR(faces[k].norm(), 1.0, 1e-12);
   }
   EXPECT_NEAR(faces[0].dot(faces[1]), -1.0, 1e-9);
+  // Sampled every millimetre (about 19,000 points, strided to about 5,000): the same.
+  const auto dense = resting_faces(box_cloud({0.10, 0.06, 0.02}, 0.001), 0.001);
+  ASSERT_EQ(dense.size(), 6u);
+  for (std::size_t k = 0; k < dense.size(); ++k)
+    EXPECT_NEAR(std::abs(dense[k](axes[k])), 1.0, 1e-9) << k;
 }
 
 TEST(RestingFaces, ASphereHasNone) {

@@ -23,6 +23,11 @@ constexpr double kDistinctFaceDeg = 20.0;
 constexpr int kRestingTurns = 24;
 // Two resting poses of a part are at least this far apart in rotation.
 constexpr double kDistinctRestingDeg = 10.0;
+// A model's faces are sought on about kFacePoints of its points at most, and its resting
+// poses scored on every kSparseStride-th point, about kScoredPoints at most: a room-sized
+// model is not searched whole.
+constexpr Eigen::Index kFacePoints = 5000;
+constexpr Eigen::Index kScoredPoints = 1000;
 
 constexpr double kRestingGap = 1.5;       // voxels
 constexpr double kSupportedShare = 0.1;   // of the pose's lowest points
@@ -74,7 +79,9 @@ Pose resting_at(const Problem& problem, MovingModel& model, const Eigen::Matrix3
 
 }  // namespace
 
-std::vector<Eigen::Vector3d> resting_faces(const PointCloud& model, double tolerance) {
+std::vector<Eigen::Vector3d> resting_faces(const PointCloud& given, double tolerance) {
+  const PointCloud model =
+      every_nth(given, std::max<Eigen::Index>(1, given.points().rows() / kFacePoints));
   const Eigen::Index n = model.points().rows();
   if (n == 0) return {};
   std::vector<Face> found;
@@ -148,8 +155,11 @@ std::vector<Transform> resting_poses(const Problem& problem, const PointCloud& s
                                      const std::vector<std::vector<Eigen::Index>>& parts,
                                      const SupportPlane& plane, int per_part) {
   const double voxel = problem.params.scene.voxel_size;
-  const std::vector<Eigen::Vector3d> faces = resting_faces(problem.model.cloud(), 0.5 * voxel);
-  ScoredModel sparse(every_nth(problem.model.cloud(), kSparseStride));
+  const PointCloud model = problem.model.cloud();
+  const std::vector<Eigen::Vector3d> faces = resting_faces(model, 0.5 * voxel);
+  const Eigen::Index stride =
+      std::max<Eigen::Index>(kSparseStride, model.points().rows() / kScoredPoints);
+  ScoredModel sparse(every_nth(model, stride));
   std::vector<std::pair<double, Transform>> poses;
   for (const auto& part : parts) {
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();

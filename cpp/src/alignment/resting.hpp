@@ -20,9 +20,9 @@
 namespace spectral_vs::detail {
 
 /// The outward unit normals (model frame) of the model's flat faces on its hull, largest
-/// first: each a set of at least kMinRestingShare of the model's points within
-/// `tolerance` metres of a supporting plane of the model, their normals within
-/// kRestingNormalDeg of the plane's.
+/// first: each a set of at least kMinRestingShare of the model's points (of about
+/// kFacePoints of them at most, evenly strided) within `tolerance` metres of a
+/// supporting plane of the model, their normals within kRestingNormalDeg of the plane's.
 std::vector<Eigen::Vector3d> resting_faces(const PointCloud& model, double tolerance);
 
 /// The rotations that rest the model on `face` (model frame) on a plane of upward normal
