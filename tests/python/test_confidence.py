@@ -96,17 +96,18 @@ def test_align_reports_what_verify_pose_measures():
 
 
 def test_the_threshold_rejects_a_wrong_single_view_pose_that_fits_its_visible_side():
-    # A case of the tuning family C-2 (flat blob 000 at 180 degrees, case 0): a truncated
-    # search (2 hypotheses, 1 refinement, no reselection: among its alternatives is the
-    # truth, as confident with more inliers) returns a pose 86 degrees off whose visible side
-    # fits the scan, scoring 0.898 at the voxel derived from the model; the threshold, chosen
-    # on the tuning families at that voxel, rejects it, and the defaults' pose passes it.
-    case = cases.make_case(cases.CaseSpec("partial", "blob000", 180.0, 0))
+    # A case of the tuning family C-2 (the jenga box at 150 degrees, case 2): a truncated
+    # search (2 hypotheses, 1 refinement, no reselection) returns the box turned 90 degrees,
+    # its visible long face on the scan's, scoring 0.73 at the voxel derived from the model;
+    # the threshold, chosen on the tuning families at that voxel, rejects it, and the
+    # defaults' pose passes it. (A flat blob's wrong pose scoring 0.898, the example while
+    # the threshold was 0.91, is now taken as right: docs/experiments.md, "Threshold".)
+    case = cases.make_case(cases.CaseSpec("partial", "jenga", 150.0, 2))
     view = {"sensor_origin": case.viewpoint, "scene_view": "single_view", "threads": 1}
     truncated = {"hypotheses": 2, "refinements": 1, "reselect_margin": 1.0}
     wrong = svs.align(case.model_cloud(), case.scene_cloud(), **truncated, **view)
     assert cases.pose_error(case, wrong.T_scene_model)[0] > 45.0
-    assert 0.85 < wrong.confidence < svs.CONFIDENCE_THRESHOLD
+    assert 0.6 < wrong.confidence < svs.CONFIDENCE_THRESHOLD
     right = svs.align(case.model_cloud(), case.scene_cloud(), **view)
     rotation, translation = cases.pose_error(case, right.T_scene_model)
     assert rotation < 5.0 and translation < 10 * MM
