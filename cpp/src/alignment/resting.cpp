@@ -177,8 +177,10 @@ std::vector<Transform> resting_poses(const Problem& problem, const PointCloud& s
     std::vector<Eigen::Matrix3d> kept;
     for (const auto& [fitness, R] : scored) {
       if (int(kept.size()) == per_part) break;
+      // C++17 lambdas cannot capture a structured binding: R by name.
+      const Eigen::Matrix3d& rotation = R;
       const auto near = [&](const Eigen::Matrix3d& other) {
-        return rotation_distance(other, R) * 180.0 / M_PI < kDistinctRestingDeg;
+        return rotation_distance(other, rotation) * 180.0 / M_PI < kDistinctRestingDeg;
       };
       if (std::any_of(kept.begin(), kept.end(), near)) continue;
       kept.push_back(R);
