@@ -1090,3 +1090,20 @@ def test_a_pcd_whose_first_line_is_a_vertical_tab_is_refused(tmp_path):
         svs.load_cloud(str(path))
     path.write_bytes(body)  # the same file without that line loads
     assert len(svs.load_cloud(str(path))) == 1
+
+
+@pytest.mark.parametrize("blank", [b"\r", b" ", b"\t"])
+def test_a_pcd_with_a_header_line_of_white_space_is_refused(tmp_path, blank):
+    """PCL's reader skips an empty header line but ends the header at a line of spaces,
+    tabs or a carriage return (a blank line of a CRLF file); its reader then crashed on
+    the header it had (found by fuzz/pcd_fuzzer)."""
+    body = (
+        b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\n"
+        b"HEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n"
+    )
+    path = tmp_path / "blank_line.pcd"
+    path.write_bytes(b"VERSION 0.7\n" + blank + b"\n" + body)
+    with pytest.raises(ValueError, match="white space only"):
+        svs.load_cloud(str(path))
+    path.write_bytes(b"VERSION 0.7\n\n" + body)  # an empty line is skipped, as PCL does
+    assert len(svs.load_cloud(str(path))) == 1

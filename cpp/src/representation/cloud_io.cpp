@@ -151,7 +151,12 @@ void check_pcd(const std::string& path) {
       bad("the header ends without a DATA line");
     }
     const std::vector<std::string> tokens = split(line);
-    if (tokens.empty() || tokens[0][0] == '#') continue;
+    if (line.empty()) continue;
+    // PCL's reader skips an empty line but ends its header at one of spaces, tabs or a
+    // carriage return (a blank line of a CRLF file), and its reader then crashed on the
+    // header it had (found by fuzz/pcd_fuzzer).
+    if (tokens.empty()) bad("a header line of white space only ends PCL's header there");
+    if (tokens[0][0] == '#') continue;
     const std::string& key = tokens[0];
     const std::vector<std::string> values(tokens.begin() + 1, tokens.end());
     if (key == "VERSION") {
