@@ -1107,3 +1107,18 @@ def test_a_pcd_with_a_header_line_of_white_space_is_refused(tmp_path, blank):
         svs.load_cloud(str(path))
     path.write_bytes(b"VERSION 0.7\n\n" + body)  # an empty line is skipped, as PCL does
     assert len(svs.load_cloud(str(path))) == 1
+
+
+def test_a_ply_with_an_indented_header_line_is_refused(tmp_path):
+    """PCL's PLY reader asserted (aborting the process) on an indented obj_info line
+    (found by fuzz/ply_fuzzer)."""
+    body = (
+        b"element vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+        b"end_header\n1 2 3\n"
+    )
+    path = tmp_path / "indented.ply"
+    path.write_bytes(b"ply\nformat ascii 1.0\n obj_info num_rows 1\n" + body)
+    with pytest.raises(ValueError, match="begins with white space"):
+        svs.load_cloud(str(path))
+    path.write_bytes(b"ply\nformat ascii 1.0\nobj_info num_rows 1\n" + body)
+    assert len(svs.load_cloud(str(path))) == 1

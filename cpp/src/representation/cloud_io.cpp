@@ -378,6 +378,11 @@ PlyLayout check_ply(const std::string& path) {
     }
     const std::vector<std::string> tokens = split(line);
     if (tokens.empty()) bad("header line ", lines + 1, " is empty");
+    // PCL's reader finds its keyword past the white space, then splits the line again
+    // and asserts (aborts the process) that the first piece is the keyword (found by
+    // fuzz/ply_fuzzer on an indented obj_info line).
+    if (line[0] == ' ' || line[0] == '\t' || line[0] == '\r')
+      bad("header line ", lines + 1, " begins with white space");
     const std::string& key = tokens[0];
     if (key == "end_header") break;
     if (key == "comment") continue;
