@@ -42,6 +42,20 @@ PointCloud patch(double x, double y, double depth, double half, double step,
   return PointCloud(p, n);
 }
 
+// The clouds one after another, points and normals.
+PointCloud joined(std::initializer_list<PointCloud> clouds) {
+  Eigen::Index rows = 0;
+  for (const PointCloud& cloud : clouds) rows += cloud.points().rows();
+  Points points(rows, 3), normals(rows, 3);
+  Eigen::Index at = 0;
+  for (const PointCloud& cloud : clouds) {
+    points.middleRows(at, cloud.points().rows()) = cloud.points();
+    normals.middleRows(at, cloud.points().rows()) = cloud.normals();
+    at += cloud.points().rows();
+  }
+  return PointCloud(points, normals);
+}
+
 const Eigen::Vector3d kToSensor(0.0, 0.0, -1.0);  // the sensor at the origin looks along +z
 
 class ViewOfAWall : public ::testing::Test {
@@ -92,10 +106,8 @@ TEST_F(ViewOfAWall, OnlyTheNearestSideFacingTheSensorCounts) {
   const PointCloud front = patch(0.0, 0.0, 1.0, 0.05, 0.003, kToSensor);
   const PointCloud back = patch(0.0, 0.0, 1.05, 0.05, 0.003, kToSensor);
   const PointCloud away = patch(0.0, 0.0, 0.9, 0.05, 0.003, -kToSensor);
-  Points points(front.points().rows() * 3, 3), normals(points.rows(), 3);
-  points << front.points(), back.points(), away.points();
-  normals << front.normals(), back.normals(), away.normals();
-  const ViewCheck check = image.check(points, normals, tolerance);
+  const PointCloud sheets = joined({front, back, away});
+  const ViewCheck check = image.check(sheets.points(), sheets.normals(), tolerance);
   EXPECT_EQ(check.contradicted + check.hidden, 0);
   EXPECT_GT(check.confirmed, 400);
 }
@@ -210,10 +222,7 @@ TEST(SupportPlane, FindsTheTableAndTheSideTheObjectsAreOn) {
   // A 0.7 m table top at z = 0.02 seen from above, a 0.1 m box standing on it.
   const PointCloud table = patch(0.0, 0.0, 0.02, 0.35, 0.005, Eigen::Vector3d::UnitZ());
   const PointCloud top = patch(0.1, 0.1, 0.12, 0.05, 0.005, Eigen::Vector3d::UnitZ());
-  Points points(table.points().rows() + top.points().rows(), 3), normals(points.rows(), 3);
-  points << table.points(), top.points();
-  normals << table.normals(), top.normals();
-  const PointCloud scene(points, normals);
+  const PointCloud scene = joined({table, top});
   const auto plane = support_plane(scene, 0.008, 0.4);
   ASSERT_TRUE(plane);
   EXPECT_NEAR(plane->normal.z(), 1.0, 1e-9);
@@ -221,8 +230,8 @@ TEST(SupportPlane, FindsTheTableAndTheSideTheObjectsAreOn) {
   EXPECT_EQ(without_support_plane(scene, *plane, 0.008, 0.012).size(),
             std::size_t(top.points().rows()));
   // Seen from below (normals and the box flipped), the plane's normal turns too.
-  Points flipped = -points;
-  const auto below = support_plane(PointCloud(flipped, -normals), 0.008, 0.4);
+  const Points flipped = -scene.points();
+  const auto below = support_plane(PointCloud(flipped, -scene.normals()), 0.008, 0.4);
   ASSERT_TRUE(below);
   EXPECT_NEAR(below->normal.z(), -1.0, 1e-9);
   // Narrower than min_extent: no support plane.
@@ -482,86 +491,8 @@ TEST(Fitness, IsTheShareOfModelVoxelsWithAgreeingSceneNormalsNearby) {
   EXPECT_EQ(around.fitness(Points(0, 3), Points(0, 3)), 0.0);
 }
 
-// Points on the six faces of an axis-aligned box of the given sizes, centred at the origin.
-Points box_surface(const Eigen::Vector3d& size, double step) {
-  std::vector<Eigen::Vector3d> points;
-  for (int axis = 0; axis < 3; ++axis) {
-    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
-    for (double a = -size(u) / 2; a <= size(u) / 2; a += step)
-      for (double b = -size(v) / 2; b <= size(v) / 2; b += step)
-        for (const double side : {-0.5, 0.5}) {
-          Eigen::Vector3d p;
-          p(axis) = side * size(axis);
-          p(u) = a;
-          p(v) = b;
-          points.push_back(p);
-        }
-  }
-  Points out(Eigen::Index(points.size()), 3);
-  for (std::size_t i = 0; i < points.size(); ++i) out.row(Eigen::Index(i)) = points[i];
-  return out;
-}
-
-TEST(SupportPlane, ItsBandStaysUnderAThinModel) {
-  // 1.5 voxels for a model thicker than 4 of them; 0.4 of a plate's 9 mm, but no less
-  // than half a voxel; the thinnest axis found whatever the box's orientation.
-  EXPECT_NEAR(support_band(box_surface({0.10, 0.08, 0.06}, 0.002), 0.008), 0.012, 1e-12);
-  EXPECT_NEAR(support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.004), 0.0036, 1e-5);
-  EXPECT_NEAR(support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.008), 0.004, 1e-12);
-  const Eigen::Matrix3d R = exp_so3(Eigen::Vector3d(0.3, -0.5, 0.9));
-  const Points turned = box_surface({0.009, 0.12, 0.09}, 0.002) * R.transpose();
-  EXPECT_NEAR(support_band(turned, 0.004), 0.0036, 1e-5);
-}
-
-TEST(SupportPlane, APlateLyingOnTheTableIsNotTakenForIt) {
-  // A 9 mm plate and a 0.1 m box on the table at z = 0.02: the plate's top face is 9 mm
-  // above the plane, inside the 1.5-voxel band at 8 mm voxels, outside the plate's own.
-  const PointCloud table = patch(0.0, 0.0, 0.02, 0.35, 0.005, Eigen::Vector3d::UnitZ());
-  const PointCloud plate = patch(-0.1, -0.1, 0.029, 0.05, 0.005, Eigen::Vector3d::UnitZ());
-  const PointCloud box = patch(0.1, 0.1, 0.12, 0.05, 0.005, Eigen::Vector3d::UnitZ());
-  Points points(table.points().rows() + 2 * box.points().rows(), 3), normals(points.rows(), 3);
-  points << table.points(), plate.points(), box.points();
-  normals << table.normals(), plate.normals(), box.normals();
-  const PointCloud scene(points, normals);
-  const auto objects = std::size_t(box.points().rows());
-  const auto plane = support_plane(scene, 0.008, 0.4);
-  ASSERT_TRUE(plane);
-  EXPECT_NEAR(plane->offset, 0.02, 1e-12);
-  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, 0.012).size(), objects);
-  const double band = support_band(box_surface({0.12, 0.09, 0.009}, 0.002), 0.008);
-  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, band).size(), 2 * objects);
-}
-
-TEST(PartCoverage, IsTheShareOfItsPartThatAPoseExplains) {
-  // On a table at z = 0: a tile's top face (40 mm square, 9 x 9 points 5 mm apart) 10 mm
-  // up and a box's top face (100 mm square, 21 x 21 points) 60 mm up. The model is the
-  // tile's face. On the tile it explains all 81 of its points; centred on the box it
-  // explains the box's points within a voxel (8 mm) of its square, 11 x 11 of 441.
-  const PointCloud table = patch(0.0, 0.0, 0.0, 0.35, 0.005, Eigen::Vector3d::UnitZ());
-  const PointCloud tile = patch(-0.15, -0.15, 0.01, 0.02, 0.005, Eigen::Vector3d::UnitZ());
-  const PointCloud box = patch(0.15, 0.15, 0.06, 0.05, 0.005, Eigen::Vector3d::UnitZ());
-  Points points(table.points().rows() + tile.points().rows() + box.points().rows(), 3);
-  Points normals(points.rows(), 3);
-  points << table.points(), tile.points(), box.points();
-  normals << table.normals(), tile.normals(), box.normals();
-  const PointCloud scene(points, normals);
-  const PointCloud model = patch(0.0, 0.0, 0.0, 0.02, 0.005, Eigen::Vector3d::UnitZ());
-  const SupportPlane plane{Eigen::Vector3d::UnitZ(), 0.0};
-  const PartCoverage coverage(scene, plane, 0.004, 0.008);
-  const auto at = [](double x, double y, double z) {
-    Transform T = Transform::Identity();
-    T.topRightCorner<3, 1>() = Eigen::Vector3d(x, y, z);
-    return T;
-  };
-  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.15, -0.15, 0.01)), 1.0);
-  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.15, 0.15, 0.06)), 121.0 / 441.0);
-  // 20 mm off the tile: 6 of its 9 columns. Away from both, or on the table alone: none.
-  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.13, -0.15, 0.01)), 54.0 / 81.0);
-  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.3)), 0.0);
-  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.0)), 0.0);
-}
-
-// A box's faces sampled every `step` metres, centred on the origin, outward normals.
+// The six faces of an axis-aligned box of the given sizes, centred at the origin, sampled
+// every `step` metres, with outward normals.
 PointCloud box_cloud(const Eigen::Vector3d& size, double step) {
   std::vector<Eigen::Vector3d> points, normals;
   for (int axis = 0; axis < 3; ++axis) {
@@ -584,6 +515,58 @@ PointCloud box_cloud(const Eigen::Vector3d& size, double step) {
     n.row(Eigen::Index(i)) = normals[i].transpose();
   }
   return PointCloud(p, n);
+}
+
+TEST(SupportPlane, ItsBandStaysUnderAThinModel) {
+  // 1.5 voxels for a model thicker than 4 of them; 0.4 of a plate's 9 mm, but no less
+  // than half a voxel; the thinnest axis found whatever the box's orientation.
+  EXPECT_NEAR(support_band(box_cloud({0.10, 0.08, 0.06}, 0.002).points(), 0.008), 0.012, 1e-12);
+  EXPECT_NEAR(support_band(box_cloud({0.12, 0.09, 0.009}, 0.002).points(), 0.004), 0.0036, 1e-5);
+  EXPECT_NEAR(support_band(box_cloud({0.12, 0.09, 0.009}, 0.002).points(), 0.008), 0.004, 1e-12);
+  const Eigen::Matrix3d R = exp_so3(Eigen::Vector3d(0.3, -0.5, 0.9));
+  const Points turned = box_cloud({0.009, 0.12, 0.09}, 0.002).points() * R.transpose();
+  EXPECT_NEAR(support_band(turned, 0.004), 0.0036, 1e-5);
+}
+
+TEST(SupportPlane, APlateLyingOnTheTableIsNotTakenForIt) {
+  // A 9 mm plate and a 0.1 m box on the table at z = 0.02: the plate's top face is 9 mm
+  // above the plane, inside the 1.5-voxel band at 8 mm voxels, outside the plate's own.
+  const PointCloud table = patch(0.0, 0.0, 0.02, 0.35, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud plate = patch(-0.1, -0.1, 0.029, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud box = patch(0.1, 0.1, 0.12, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud scene = joined({table, plate, box});
+  const auto objects = std::size_t(box.points().rows());
+  const auto plane = support_plane(scene, 0.008, 0.4);
+  ASSERT_TRUE(plane);
+  EXPECT_NEAR(plane->offset, 0.02, 1e-12);
+  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, 0.012).size(), objects);
+  const double band = support_band(box_cloud({0.12, 0.09, 0.009}, 0.002).points(), 0.008);
+  EXPECT_EQ(without_support_plane(scene, *plane, 0.008, band).size(), 2 * objects);
+}
+
+TEST(PartCoverage, IsTheShareOfItsPartThatAPoseExplains) {
+  // On a table at z = 0: a tile's top face (40 mm square, 9 x 9 points 5 mm apart) 10 mm
+  // up and a box's top face (100 mm square, 21 x 21 points) 60 mm up. The model is the
+  // tile's face. On the tile it explains all 81 of its points; centred on the box it
+  // explains the box's points within a voxel (8 mm) of its square, 11 x 11 of 441.
+  const PointCloud table = patch(0.0, 0.0, 0.0, 0.35, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud tile = patch(-0.15, -0.15, 0.01, 0.02, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud box = patch(0.15, 0.15, 0.06, 0.05, 0.005, Eigen::Vector3d::UnitZ());
+  const PointCloud scene = joined({table, tile, box});
+  const PointCloud model = patch(0.0, 0.0, 0.0, 0.02, 0.005, Eigen::Vector3d::UnitZ());
+  const SupportPlane plane{Eigen::Vector3d::UnitZ(), 0.0};
+  const PartCoverage coverage(scene, plane, 0.004, 0.008);
+  const auto at = [](double x, double y, double z) {
+    Transform T = Transform::Identity();
+    T.topRightCorner<3, 1>() = Eigen::Vector3d(x, y, z);
+    return T;
+  };
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.15, -0.15, 0.01)), 1.0);
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.15, 0.15, 0.06)), 121.0 / 441.0);
+  // 20 mm off the tile: 6 of its 9 columns. Away from both, or on the table alone: none.
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(-0.13, -0.15, 0.01)), 54.0 / 81.0);
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.3)), 0.0);
+  EXPECT_DOUBLE_EQ(coverage.explained_share(model, at(0.0, 0.0, 0.0)), 0.0);
 }
 
 Transform translation(double x, double y, double z) {
@@ -641,10 +624,7 @@ TEST(RestingCheck, TellsAPoseOnTheTableOrAnObjectFromOneInsideOrUnderIt) {
   // model is a 40 x 40 x 10 mm slab; voxels of 6 mm (a gap of 9 mm).
   const PointCloud table = patch(0.0, 0.0, 0.0, 0.35, 0.005, Eigen::Vector3d::UnitZ());
   const PointCloud box = patch(0.15, 0.15, 0.03, 0.05, 0.005, Eigen::Vector3d::UnitZ());
-  Points points(table.points().rows() + box.points().rows(), 3), normals(points.rows(), 3);
-  points << table.points(), box.points();
-  normals << table.normals(), box.normals();
-  const PointCloud scene(points, normals);
+  const PointCloud scene = joined({table, box});
   const RestingCheck check(scene, SupportPlane{Eigen::Vector3d::UnitZ(), 0.0}, 0.006);
   const PointCloud slab = box_cloud({0.04, 0.04, 0.01}, 0.002);
   EXPECT_TRUE(check.rests(slab, translation(-0.15, -0.15, 0.005)));  // on the table

@@ -99,14 +99,20 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
   return hypotheses;
 }
 
-namespace {
-
-// A part's rotation placed at its centroid (the model's side facing the sensor there, for
-// a view), then by the phase correlation of `grid`.
-Pose placed_at_part(const Problem& problem, MovingModel& model, const Eigen::Matrix3d& R,
-                    const Eigen::Vector3d& centroid, TranslationWindow& grid) {
+Pose facing_at_part(const Problem& problem, MovingModel& model, const Eigen::Matrix3d& R,
+                    const Eigen::Vector3d& centroid) {
   Pose pose{R, centroid - model.centroid()};
   if (problem.viewpoint) pose.offset -= model.facing_side(R, centroid - *problem.viewpoint);
+  return pose;
+}
+
+namespace {
+
+// A part's rotation placed at its centroid (facing_at_part), then by the phase
+// correlation of `grid`.
+Pose placed_at_part(const Problem& problem, MovingModel& model, const Eigen::Matrix3d& R,
+                    const Eigen::Vector3d& centroid, TranslationWindow& grid) {
+  Pose pose = facing_at_part(problem, model, R, centroid);
   pose.offset += grid.estimate(model.move(pose)).shift;
   return pose;
 }

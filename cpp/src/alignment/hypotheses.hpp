@@ -32,6 +32,11 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
                                         int per_part, bool screen,
                                         std::optional<TranslationWindow>& window);
 
+/// The model at rotation R with its side facing the sensor at `centroid` (its centroid
+/// there, without a sensor): where a part's hypotheses start from.
+Pose facing_at_part(const Problem& problem, MovingModel& model, const Eigen::Matrix3d& R,
+                    const Eigen::Vector3d& centroid);
+
 /// The best-ranked hypotheses turned to the fittest of their turns about the model's
 /// flat axis (problem.flat_axis), when it has one.
 void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypotheses,

@@ -1,5 +1,7 @@
 #include "alignment/resting.hpp"
 
+#include "alignment/hypotheses.hpp"
+
 #include <spectral_vs/rotation/so3.hpp>
 
 #include <Eigen/Geometry>
@@ -71,8 +73,7 @@ double lowest(const Points& points, const SupportPlane& plane) {
 // the plane.
 Pose resting_at(const Problem& problem, MovingModel& model, const Eigen::Matrix3d& R,
                 const Eigen::Vector3d& centroid, const SupportPlane& plane) {
-  Pose pose{R, centroid - model.centroid()};
-  if (problem.viewpoint) pose.offset -= model.facing_side(R, centroid - *problem.viewpoint);
+  Pose pose = facing_at_part(problem, model, R, centroid);
   pose.offset -= lowest(model.move(pose), plane) * plane.normal;
   return pose;
 }
@@ -115,37 +116,41 @@ std::vector<Eigen::Matrix3d> resting_rotations(const Eigen::Vector3d& face,
 }
 
 RestingCheck::RestingCheck(const PointCloud& scene, const SupportPlane& plane, double voxel_size)
-    : plane_(plane), voxel_size_(voxel_size) {
+    : scene_(scene), plane_(plane), voxel_size_(voxel_size) {}
+
+const IcpScene* RestingCheck::upward() const {
+  if (upward_built_) return upward_ ? &*upward_ : nullptr;
+  upward_built_ = true;
   std::vector<Eigen::Index> rows;
-  for (Eigen::Index i = 0; i < scene.points().rows(); ++i) {
-    if (scene.normals().row(i).dot(plane.normal) >= kUpwardCosine) rows.push_back(i);
+  for (Eigen::Index i = 0; i < scene_.points().rows(); ++i) {
+    if (scene_.normals().row(i).dot(plane_.normal) >= kUpwardCosine) rows.push_back(i);
   }
-  if (rows.empty()) return;
-  upward_points_ = PointCloud(rows_of(scene.points(), rows), rows_of(scene.normals(), rows));
+  if (rows.empty()) return nullptr;
+  upward_points_ = PointCloud(rows_of(scene_.points(), rows), rows_of(scene_.normals(), rows));
   Eigen::AlignedBox3d box = bounding_box(upward_points_);
-  box.min().array() -= kRestingGap * voxel_size;
-  box.max().array() += kRestingGap * voxel_size;
-  upward_.emplace(upward_points_, box, kRestingGap * voxel_size);
+  box.min().array() -= kRestingGap * voxel_size_;
+  box.max().array() += kRestingGap * voxel_size_;
+  upward_.emplace(upward_points_, box, kRestingGap * voxel_size_);
+  return &*upward_;
 }
 
 bool RestingCheck::rests(const PointCloud& model, const Transform& T_scene_model) const {
-  const Points moved =
-      (model.points() * T_scene_model.topLeftCorner<3, 3>().transpose()).rowwise() +
-      T_scene_model.topRightCorner<3, 1>().transpose();
+  const Points moved = model.transformed(T_scene_model).points();
   const Eigen::VectorXd height = (moved * plane_.normal).array() - plane_.offset;
   const double low = height.minCoeff();
   const double gap = kRestingGap * voxel_size_;
   if (low < -gap) return false;
   if (low <= gap) return true;
-  if (!upward_) return false;
+  const IcpScene* upward = this->upward();
+  if (!upward) return false;
   int bottom = 0, supported = 0;
   for (Eigen::Index i = 0; i < moved.rows(); ++i) {
     if (height(i) > low + voxel_size_) continue;
     ++bottom;
     const Eigen::Vector3d p = moved.row(i).transpose();
-    const Eigen::Index j = upward_->nearest(p, plane_.normal, gap, kUpwardCosine);
+    const Eigen::Index j = upward->nearest(p, plane_.normal, gap, kUpwardCosine);
     if (j < 0) continue;
-    const double below = upward_->cloud().points().row(j).dot(plane_.normal) - plane_.offset;
+    const double below = upward->cloud().points().row(j).dot(plane_.normal) - plane_.offset;
     if (below <= low + 0.5 * voxel_size_) ++supported;
   }
   return supported >= kSupportedShare * bottom;

@@ -41,10 +41,16 @@ class RestingCheck {
   bool rests(const PointCloud& model, const Transform& T_scene_model) const;
 
  private:
+  // The scene's upward-facing points in cells, made at the first pose that is not on the
+  // plane (most returned poses are: then nothing is made); none if there are none.
+  const IcpScene* upward() const;
+
+  const PointCloud& scene_;
   SupportPlane plane_;
   double voxel_size_;
-  PointCloud upward_points_;        // the scene's points whose normals face up
-  std::optional<IcpScene> upward_;  // ... sorted into cells
+  mutable bool upward_built_ = false;
+  mutable PointCloud upward_points_;        // the scene's points whose normals face up
+  mutable std::optional<IcpScene> upward_;  // ... sorted into cells
 };
 
 /// Poses resting on `plane` at each part of `scene` (rows of it): per part, the model on

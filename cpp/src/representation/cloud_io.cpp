@@ -150,8 +150,8 @@ void check_pcd(const std::string& path) {
       }
       bad("the header ends without a DATA line");
     }
-    const std::vector<std::string> tokens = split(line);
     if (line.empty()) continue;
+    const std::vector<std::string> tokens = split(line);
     // PCL's reader skips an empty line but ends its header at one of spaces, tabs or a
     // carriage return (a blank line of a CRLF file), and its reader then crashed on the
     // header it had (found by fuzz/pcd_fuzzer).
