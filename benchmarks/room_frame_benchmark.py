@@ -19,7 +19,7 @@ two voxels of the defaults (a room registered at decimetre voxels is not held to
 10 mm of an object). Writes benchmarks/results/room_frame.json and the table between the
 ``room-frame`` markers of docs/benchmarks.md. Usage::
 
-    OMP_NUM_THREADS=1 python benchmarks/room_frame_benchmark.py --seeds 5
+    OMP_NUM_THREADS=1 python benchmarks/room_frame_benchmark.py --seeds 10
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def table(records: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--max-seconds", type=float, default=0.0)
     args = parser.parse_args()
     records = run(args.seeds, args.max_seconds)

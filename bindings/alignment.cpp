@@ -170,6 +170,8 @@ hypotheses : int
 refinements : int
     The best-verified hypotheses Algorithm 1 then runs from, each in a window of the
     scene around it; the best final fitness is kept (default 3, at most hypotheses).
+    At most: after the first, a hypothesis fitting under 0.65 of the best refined
+    pose's fitness is skipped (with a neighbourhood, never the guess).
 search_voxel_size : float
     Voxel of the global search's translation grid, metres; 0 (default): twice
     voxel_size, coarser where needed to keep that grid under 2^19 voxels.
@@ -437,6 +439,10 @@ confidence : float
                     "Phase correlations of the final polish (0 without).")
       .def_readonly("icp_iterations", &AlignResult::icp_iterations,
                     "Steps of the ICP refinement (0 without, or if not kept).")
+      .def_readonly("refinements_run", &AlignResult::refinements_run,
+                    "Global-search hypotheses refined by Algorithm 1: at most "
+                    "search.refinements (those fitting under 0.65 of the best refined pose "
+                    "are skipped); 0 without global search.")
       .def_property_readonly(
           "window_dims", [](const AlignResult& r) { return Eigen::Vector3i(r.window_dims); },
           "Voxels of the window Algorithm 1 ran in, per axis.")

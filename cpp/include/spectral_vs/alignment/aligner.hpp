@@ -103,7 +103,10 @@ struct GlobalSearchParams {
                               ///< from the part's others once refined. >= 1.
   int refinements = 3;        ///< The best-verified hypotheses that Algorithm 1 then runs from,
                               ///< each in a window of the scene around it; the one with the
-                              ///< best final fitness is kept. In [1, hypotheses].
+                              ///< best final fitness is kept. At most: after the first, a
+                              ///< hypothesis fitting under 0.65 of the best refined pose's
+                              ///< fitness is skipped (with a neighbourhood, never the
+                              ///< guess). In [1, hypotheses].
   double search_voxel_size = 0.0;  ///< Voxel of the global search's translation grid, metres.
                                    ///< 0: twice voxel_size, coarser where needed to keep that
                                    ///< grid under 2^19 voxels (large scenes).
@@ -281,6 +284,9 @@ struct AlignResult {
   Eigen::Vector3i window_dims = Eigen::Vector3i::Zero();  ///< Voxels of the local window.
   int polish_evaluations = 0;  ///< Phase correlations of the final polish (0 without).
   int icp_iterations = 0;      ///< Steps of the ICP refinement (0 without, or if not kept).
+  /// Global-search hypotheses refined by Algorithm 1: at most search.refinements (those
+  /// fitting under 0.65 of the best refined pose are skipped); 0 without global search.
+  int refinements_run = 0;
   /// Every iteration of that run; history.back().T_scene_model is where Algorithm 1
   /// ended, T_scene_model that pose after the polish and ICP (equal without them).
   std::vector<AlignIteration> history;
