@@ -409,6 +409,15 @@ std::vector<Case> cases() {
                                                  "0 0 0\n1 0 0\n0 1 0\n2 1\n"));
        },
        "gives 2 x 1 points for 3 vertices"},
+      {"load_ply_no_vertices_tall_viewport",  // 0 x 2e9 points (fuzz/ply_fuzzer)
+       [] {
+         load_cloud(write_file("tall.ply", std::string(kPlyHead) +
+                                               "element vertex 0\nproperty float x\n"
+                                               "property float y\nproperty float z\n"
+                                               "element camera 1\nproperty int viewporty\n"
+                                               "end_header\n2000000000\n"));
+       },
+       "holds no finite point (0 in the file)"},
       {"load_ply_duplicate_property",
        [] {
          load_cloud(write_file("twice.ply", std::string(kPlyHead) +

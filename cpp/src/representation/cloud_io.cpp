@@ -551,6 +551,9 @@ Points extract(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointField* field
          " points");
   }
   Points out(static_cast<Eigen::Index>(rows * cols), 3);
+  // A PLY of no vertices can still be 2^32 - 1 rows high (a camera element's viewport):
+  // rows of no point are not walked one by one.
+  if (out.rows() == 0) return out;
   for (std::size_t r = 0; r < rows; ++r) {
     for (std::size_t c = 0; c < cols; ++c) {
       const std::uint8_t* point = cloud.data.data() + r * cloud.row_step + c * cloud.point_step;
