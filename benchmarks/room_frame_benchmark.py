@@ -79,6 +79,7 @@ def run(seeds: int, max_seconds: float) -> list[dict]:
                 "rotation_error_deg": rotation,
                 "translation_error_m": translation,
                 "stop_reason": result.stop_reason,
+                "refinements_run": result.refinements_run,
                 "scene_points": len(scene),
                 "model_points": len(pair.current),
             }

@@ -379,8 +379,9 @@ TEST(AlignResult, HistoryDescribesTheReturnedPose) {
 TEST(AlignResult, RefinementsRunCountsTheRefinedHypotheses) {
   const Case c = make_case(120.0, 7);
   AlignParams params;
-  EXPECT_GE(align(c.model, c.scene, params).refinements_run, 1);
-  EXPECT_LE(align(c.model, c.scene, params).refinements_run, params.search.refinements);
+  const int runs = align(c.model, c.scene, params).refinements_run;
+  EXPECT_GE(runs, 1);
+  EXPECT_LE(runs, params.search.refinements);
   params.search.refinements = 1;
   EXPECT_EQ(align(c.model, c.scene, params).refinements_run, 1);
   params.search.global_search = false;

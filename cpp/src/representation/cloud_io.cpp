@@ -551,7 +551,7 @@ Points extract(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointField* field
          " points");
   }
   Points out(static_cast<Eigen::Index>(rows * cols), 3);
-  // A PLY of no vertices can still be 2^32 - 1 rows high (a camera element's viewport):
+  // A PLY of no vertices can still be 2^31 - 1 rows high (a camera element's viewport):
   // rows of no point are not walked one by one.
   if (out.rows() == 0) return out;
   for (std::size_t r = 0; r < rows; ++r) {
