@@ -409,6 +409,53 @@ TEST(BoundedGrid, KeepsTheSceneInReachOfTheModel) {
   EXPECT_EQ(points_in_reach(scene, far, reach).rows(), scene.rows());
 }
 
+// A window around a model whose reach is larger than the scene is wide holds, on each
+// such axis, only the scene's extent and the margin: a smaller grid that finds the same
+// shift (phase correlation: within a millimetre at 10 mm voxels).
+TEST(TranslationWindow, OnAnAxisNarrowerInTheSceneHoldsOnlyTheScene) {
+  std::mt19937 rng(8);
+  const PointCloud model = test::box_and_sphere(6000, rng);
+  const Eigen::Vector3d shift(0.031, -0.017, 0.012);
+  const PointCloud scene = model.transformed(test::translation(shift));
+  const SceneMap map(scene, scene, 0.01, GridLimits{});
+  const double reach = 0.2, margin = 0.05, voxel = 0.01;
+  const Eigen::Vector3d centre = scene.centroid();
+  TranslationWindow window(map, reach, margin, centre, voxel, Occupancy::trilinear,
+                           PhaseCorrelationParams{}, GridLimits{});
+  const int cube = fft_friendly_size(int(std::ceil(2.0 * (reach + margin) / voxel)) + 3);  // 64
+  const Eigen::AlignedBox3d box = bounding_box(scene);
+  for (int a = 0; a < 3; ++a) {
+    const int scene_voxels =
+        fft_friendly_size(int(std::ceil((box.sizes()[a] + 2 * margin) / voxel)) + 3);
+    EXPECT_EQ(window.dims()[a], std::min(cube, scene_voxels)) << a;
+    EXPECT_LT(window.dims()[a], cube) << a;  // the scene is under 0.3 m on every axis
+  }
+  const TranslationEstimate estimate = window.estimate(model.points());
+  EXPECT_LT((estimate.shift - shift).norm(), 0.001) << estimate.shift.transpose();
+}
+
+// Model points past a window that holds only the scene's extent still weigh in the
+// overlap, at the energy per point of those inside. Binary voxels, one point per voxel:
+// a 20 x 20 patch matched by a model with as many points again 0.3 m above it (beyond
+// the window, inside the model's cube) overlaps by 400 / sqrt(800 * 400) = 1 / sqrt(2).
+TEST(TranslationWindow, CountsModelPointsPastTheWindowInTheOverlap) {
+  const double voxel = 0.01;
+  Points patch(400, 3), model(800, 3);
+  for (int i = 0; i < 20; ++i)
+    for (int j = 0; j < 20; ++j) {
+      const Eigen::RowVector3d p((i + 0.5) * voxel, (j + 0.5) * voxel, 0.5 * voxel);
+      patch.row(20 * i + j) = p;
+      model.row(20 * i + j) = p;
+      model.row(400 + 20 * i + j) = p + Eigen::RowVector3d(0.0, 0.0, 0.3);
+    }
+  const PointCloud scene(patch);
+  const SceneMap map(scene, scene, voxel, GridLimits{});
+  TranslationWindow window(map, 0.3, 0.05, Eigen::Vector3d(0.1, 0.1, 0.005), voxel,
+                           Occupancy::binary, PhaseCorrelationParams{}, GridLimits{});
+  EXPECT_NEAR(window.overlap(patch), 1.0, 1e-9);
+  EXPECT_NEAR(window.overlap(model), 1.0 / std::sqrt(2.0), 1e-9);
+}
+
 }  // namespace
 }  // namespace spectral_vs::detail
 

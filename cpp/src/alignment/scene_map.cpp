@@ -156,15 +156,27 @@ std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) co
 
 namespace {
 
-GridSpec window_spec(double half_width, double voxel_size, const GridLimits& limits) {
+// Voxels of a window axis `length` metres long, with one voxel of room on each side so
+// that a shift by the margin stays unaliased.
+int window_voxels(double length, double voxel_size, const GridLimits& limits) {
+  return fft_friendly_size(voxels_along(length, voxel_size, limits) + 3);
+}
+
+// The window's grid: per axis the cube's 2 half_width, or the scene's extent with the
+// margin on each side where that is fewer voxels (`on_scene`).
+GridSpec window_spec(double half_width, double margin, const Eigen::AlignedBox3d& scene_box,
+                     double voxel_size, const GridLimits& limits, std::array<bool, 3>& on_scene) {
   GridSpec spec;
   spec.resolution = voxel_size;
-  // The window plus one voxel on each side, so a shift by the margin stays unaliased.
-  const int n = fft_friendly_size(voxels_along(2.0 * half_width, voxel_size, limits) + 3);
-  spec.dims = Eigen::Vector3i::Constant(n);
+  const int cube = window_voxels(2.0 * half_width, voxel_size, limits);
+  for (int axis = 0; axis < 3; ++axis) {
+    const int scene = window_voxels(scene_box.sizes()[axis] + 2.0 * margin, voxel_size, limits);
+    on_scene[axis] = scene < cube;
+    spec.dims[axis] = on_scene[axis] ? scene : cube;
+  }
   if (spec.voxel_count() > limits.max_voxels) {
-    fail("voxel_size: a window of ", n, "^3 voxels at ", voxel_size, " m exceeds the limit of ",
-         limits.max_voxels, " voxels (max_voxels)");
+    fail("voxel_size: a window of ", spec.dims.transpose(), " voxels at ", voxel_size,
+         " m exceeds the limit of ", limits.max_voxels, " voxels (max_voxels)");
   }
   return spec;
 }
@@ -181,7 +193,8 @@ TranslationWindow::TranslationWindow(const SceneMap& scene, double reach, double
       half_width_(reach + margin),
       margin_(margin),
       max_shift_(Eigen::Vector3i::Constant(voxels_along(margin, voxel_size, limits))),
-      spec_(window_spec(half_width_, voxel_size, limits)),
+      scene_box_(bounding_box(scene.cloud())),
+      spec_(window_spec(half_width_, margin, scene_box_, voxel_size, limits, on_scene_)),
       phase_(spec_, params) {
   place(centre);
 }
@@ -189,8 +202,13 @@ TranslationWindow::TranslationWindow(const SceneMap& scene, double reach, double
 void TranslationWindow::place(const Eigen::Vector3d& centre) {
   centre_ = centre;
   const double r = spec_.resolution;
-  // Snapped to the voxel lattice: windows placed anywhere share voxel boundaries.
-  spec_.origin = (((centre.array() - half_width_) / r).floor() - 1.0).matrix() * r;
+  // Snapped to the voxel lattice: windows placed anywhere share voxel boundaries. On an
+  // axis narrower in the scene, the window holds the scene's extent and the margin.
+  for (int axis = 0; axis < 3; ++axis) {
+    const double low =
+        on_scene_[axis] ? scene_box_.min()[axis] - margin_ : centre[axis] - half_width_;
+    spec_.origin[axis] = (std::floor(low / r) - 1.0) * r;
+  }
   const std::vector<Eigen::Index> rows = scene_->points_in(cube(centre, half_width_));
   voxelize_subset(scene_->cloud(), rows, spec_, occupancy_, target_, limits_);
   target_energy_ = grid_energy(target_);
@@ -225,6 +243,10 @@ double TranslationWindow::overlap(const Points& moved) {
         energy += m * m;
         cross += m * target_.at(i, j, k);
       }
+  // Points outside a window that holds only the scene's extent on some axis meet no scene
+  // at any shift; they still count, at the energy per point of those inside.
+  const double inside = double(moved.rows()) - double(moving_.points_outside);
+  if (inside > 0.0) energy *= double(moved.rows()) / inside;
   return energy > 0.0 ? cross / std::sqrt(energy * target_energy_) : 0.0;
 }
 

@@ -10,6 +10,7 @@
 #include "alignment/fitness_map.hpp"
 
 #include <Eigen/Geometry>
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -97,6 +98,11 @@ class SceneMap {
 /// A cubic window of the scene around the model, on a grid only as large as the window:
 /// the shift is bounded by the margin, which keeps the small grid free of wrap-around.
 /// Re-placed (the scene re-voxelized and transformed) when the model leaves its centre.
+/// On an axis where the scene is narrower than the cube (a model as large as the scene,
+/// such as a room's depth frame, whose reach is a radius and the cube twice that on every
+/// axis), the window holds the scene's extent and the margin instead: model points past
+/// it meet no scene point at any shift within the margin, so the correlation at every
+/// shift sought is the same, on a grid up to 10 times smaller.
 class TranslationWindow : public TranslationSource {
  public:
   /// A window of half-width `reach + margin` metres, placed around `centre`.
@@ -131,6 +137,8 @@ class TranslationWindow : public TranslationSource {
   GridLimits limits_;
   double half_width_, margin_;
   Eigen::Vector3i max_shift_;
+  Eigen::AlignedBox3d scene_box_;
+  std::array<bool, 3> on_scene_{};  // axes on which the window holds the scene's extent
   GridSpec spec_;
   PhaseCorrelation phase_;
   Eigen::Vector3d centre_;
