@@ -33,6 +33,11 @@ OpenMP: Open3D and small_gicp each bring an OpenMP runtime; on 2 cores two spinn
 runtimes starve each other, so ``OMP_WAIT_POLICY=PASSIVE`` is set before either is
 imported (this module imports them lazily). The thread count of Open3D is fixed at its
 import by ``OMP_NUM_THREADS``, which :func:`configure_threads` sets before the import.
+Open3D 0.19 and later run part of their pipelines (FPFH + RANSAC among them) on TBB,
+which ``OMP_NUM_THREADS`` does not bound: on a free second core RANSAC's CPU time was
+twice its wall time (0.21-0.24 s against 0.11-0.12 s on a C-2 case; 0.19 s pinned to one
+core). :func:`configure_threads` therefore also pins the process to as many cores as
+threads, so that every method runs on the threads it is given.
 """
 
 from __future__ import annotations
@@ -136,7 +141,8 @@ class PeerResult(NamedTuple):
 
 
 def configure_threads(threads: int) -> None:
-    """Set the OpenMP thread count of the peers; call before the first :func:`register`.
+    """Set the OpenMP thread count of the peers and pin the process to as many cores (TBB);
+    call before the first :func:`register`.
 
     Raises
     ------
@@ -148,6 +154,9 @@ def configure_threads(threads: int) -> None:
     if "open3d" in sys.modules and os.environ.get("OMP_NUM_THREADS") != str(threads):
         raise RuntimeError("open3d is already imported: set the threads before importing it")
     os.environ["OMP_NUM_THREADS"] = str(threads)
+    if hasattr(os, "sched_setaffinity"):  # TBB sizes its pool by the cores it may run on
+        cores = sorted(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, cores[:threads])
 
 
 def import_peers() -> dict[str, str]:

@@ -90,6 +90,25 @@ def test_quick_run(tmp_path: Path) -> None:
     assert len(results["determinism"]) == len(peers.METHODS)
 
 
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity here")
+def test_configure_threads_pins_the_process_to_as_many_cores() -> None:
+    # In a child process: the pin would stay on this one. Open3D's TBB loops are bounded
+    # only by the cores the process may run on.
+    code = (
+        "import os, peers; peers.configure_threads(1); "
+        "print(len(os.sched_getaffinity(0)), os.environ['OMP_NUM_THREADS'])"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=ROOT / "benchmarks",
+        timeout=60,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["1", "1"]
+
+
 def _records(method: str, success: bool, case_ids: list[str]) -> list[dict]:
     return [
         {"case_id": c, "family": "full", "angle_deg": 30.0, "method": method,
