@@ -115,7 +115,7 @@ def sets(seeds: int, more_seeds: int, table_seeds: int) -> list[tuple[str, str, 
 
 def table(records: list[dict]) -> str:
     rows = [
-        "| frames | variant | frames | voxel | single view detected | success (< 5 deg, < 2 voxels of the defaults) "  # noqa: E501
+        "| set | variant | frames | voxel | single view detected | success (< 5 deg, < 2 voxels of the defaults) "  # noqa: E501
         "| median rotation error | median translation error | median CPU time | max CPU time | under 1 s |",  # noqa: E501
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
