@@ -37,7 +37,8 @@ Open3D 0.19 and later run part of their pipelines (FPFH + RANSAC among them) on 
 which ``OMP_NUM_THREADS`` does not bound: on a free second core RANSAC's CPU time was
 twice its wall time (0.21-0.24 s against 0.11-0.12 s on a C-2 case; 0.19 s pinned to one
 core). :func:`configure_threads` therefore also pins the process to as many cores as
-threads, so that every method runs on the threads it is given.
+threads (the first it may run on: to run two benchmarks side by side, start each under
+``taskset -c N``), so that every method runs on the threads it is given.
 """
 
 from __future__ import annotations
