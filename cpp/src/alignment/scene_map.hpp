@@ -100,9 +100,10 @@ class SceneMap {
 /// Re-placed (the scene re-voxelized and transformed) when the model leaves its centre.
 /// On an axis where the scene is narrower than the cube (a model as large as the scene,
 /// such as a room's depth frame, whose reach is a radius and the cube twice that on every
-/// axis), the window holds the scene's extent and the margin instead: model points past
-/// it meet no scene point at any shift within the margin, so the correlation at every
-/// shift sought is the same, on a grid up to 10 times smaller.
+/// axis), the window holds the scene's extent and the margin instead, on a grid up to 10
+/// times smaller: model points past it meet no scene point at any shift within the
+/// margin (they would add to the model's spectrum, not to its match); overlap() still
+/// counts them.
 class TranslationWindow : public TranslationSource {
  public:
   /// A window of half-width `reach + margin` metres, placed around `centre`.
