@@ -329,18 +329,24 @@ void define_alignment(py::module_& m) {
   py::class_<AlignAlternative>(m, "AlignAlternative", R"doc(
 Another pose that the scene supports about as well as the returned one.
 
-Attributes: ``T_scene_model`` (4x4), ``confidence`` (as AlignResult.confidence), ``inliers``,
+Attributes: ``T_scene_model`` (4x4), ``confidence`` (as AlignResult.confidence: calibrated),
+``score`` (as AlignResult.score: uncalibrated), ``inliers``,
 ``inlier_rmse`` (metres), ``rotation_apart`` (radians from the returned pose),
-``translation_apart`` (metres between the model centroids of the two poses).
+``translation_apart`` (metres between the model centroids of the two poses), ``symmetric``
+(the model maps onto itself by the turn between the poses: the same answer).
 )doc")
       .def_property_readonly(
           "T_scene_model",
           [](const AlignAlternative& a) { return Eigen::Matrix4d(a.T_scene_model); })
       .def_readonly("confidence", &AlignAlternative::confidence)
+      .def_readonly("score", &AlignAlternative::score)
       .def_readonly("inliers", &AlignAlternative::inliers)
       .def_readonly("inlier_rmse", &AlignAlternative::inlier_rmse, "Metres.")
       .def_readonly("rotation_apart", &AlignAlternative::rotation_apart, "Radians.")
       .def_readonly("translation_apart", &AlignAlternative::translation_apart, "Metres.")
+      .def_readonly("symmetric", &AlignAlternative::symmetric,
+                    "True when the model maps onto itself by the turn from the returned pose "
+                    "to this one: the same answer up to the object's symmetry (not ambiguous).")
       .def("__repr__", [](const AlignAlternative& a) {
         std::ostringstream out;
         out << "AlignAlternative(confidence=" << a.confidence << ", inliers=" << a.inliers
@@ -393,6 +399,7 @@ confidence : float
       });
 
   m.attr("CONFIDENCE_THRESHOLD") = kConfidenceThreshold;
+  m.attr("RELIABLE_CONFIDENCE") = kReliableConfidence;
 
   m.def(
       "_verify_pose",
@@ -407,6 +414,24 @@ confidence : float
       },
       py::arg("model"), py::arg("scene"), py::arg("T_scene_model"), py::arg("voxel_size"),
       py::arg("viewpoint"), "verify_pose on clouds with normals; see spectral_vs.verify_pose.");
+
+  m.def(
+      "pose_covariance",
+      [](const PointCloud& model, const PointCloud& scene, const py::handle& T, double voxel_size) {
+        const Transform T_scene_model = to_transform(T, "T_scene_model");
+        py::gil_scoped_release release;
+        return Eigen::Matrix<double, 6, 6>(
+            pose_covariance(model, scene, T_scene_model, voxel_size));
+      },
+      py::arg("model"), py::arg("scene"), py::arg("T_scene_model"), py::arg("voxel_size"),
+      R"doc(
+The 6x6 covariance of the pose error at T_scene_model, as align() reports it: rotation
+vector (rad) then translation (m) of a left perturbation T_true = exp(delta) T_scene_model
+in the scene frame. From the point-to-plane fit of the model (with normals) onto the scene
+(with normals): pairs within voxel_size (metres) whose normals agree within 45 degrees,
+the residuals' variance, an inflation calibrated on the calibration set, and a weak prior
+that keeps unconstrained directions finite (docs/trust.md).
+)doc");
 
   py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
       .def_property_readonly(
@@ -454,13 +479,36 @@ confidence : float
       .def_readonly("single_view", &AlignResult::single_view,
                     "True when the scene was checked as a single view from sensor_origin "
                     "(declared, or detected by detect_single_view).")
+      .def_readonly("reliable", &AlignResult::reliable,
+                    "The verdict: True when status is 'reliable' (confidence at least "
+                    "RELIABLE_CONFIDENCE, no alternative as good, the search finished in time, "
+                    "the voxel in range). The one field to check before acting on the pose.")
+      .def_property_readonly(
+          "status", [](const AlignResult& r) { return std::string(verdict_name(r.status)); },
+          "The verdict in one word: 'reliable', 'ambiguous', 'doubtful', 'undetermined', "
+          "'no_support', "
+          "'max_seconds', 'bad_scale' or 'unverified' (docs/trust.md).")
+      .def_readonly("determined", &AlignResult::determined,
+                    "True when the scene pins the pose down: two standard deviations of "
+                    "the covariance within 5 degrees and, at the model's centroid, 10 mm.")
       .def_readonly("confidence", &AlignResult::confidence,
-                    "The confidence that the pose is right, in [0, 1]: the share of the model "
-                    "points the sensor would see that lie within a quarter voxel of a scene "
-                    "point turned the same way, times one minus the share it saw through. "
-                    "Above CONFIDENCE_THRESHOLD the pose is taken as right.")
+                    "The probability that the pose is right (within 5 degrees and 10 mm), in "
+                    "[0, 1]: score through the calibration map fitted on the calibration set.")
+      .def_readonly("score", &AlignResult::score,
+                    "The verification's score, uncalibrated, in [0, 1]: the share of the "
+                    "model points the sensor would see that lie within half a voxel of a "
+                    "scene point turned the same way, times one minus the share it saw "
+                    "through.")
+      .def_property_readonly(
+          "covariance",
+          [](const AlignResult& r) { return Eigen::Matrix<double, 6, 6>(r.covariance); },
+          "6x6 covariance of the pose error: rotation vector (rad) then translation (m) of "
+          "a left perturbation T_true = exp(delta) T_scene_model, scene frame.")
       .def_readonly("inliers", &AlignResult::inliers,
-                    "Model points within inlier_distance of their nearest scene point.")
+                    "Model points (as aligned, downsampled) within inlier_distance of their "
+                    "nearest scene point.")
+      .def_readonly("inlier_fraction", &AlignResult::inlier_fraction,
+                    "inliers / model points (as aligned), in [0, 1].")
       .def_readonly("inlier_rmse", &AlignResult::inlier_rmse,
                     "RMS distance of the inliers to their nearest scene points, metres.")
       .def_readonly("inlier_distance", &AlignResult::inlier_distance,
@@ -469,11 +517,13 @@ confidence : float
                     "Poses more than 5 degrees or 10 mm from this one (and from each other) "
                     "whose confidence is within 0.05 of this one's, best first.")
       .def_readonly("ambiguous", &AlignResult::ambiguous,
-                    "True when there is an alternative: the scene does not tell the pose "
-                    "from another one.")
+                    "True when there is an alternative that is not symmetric: the scene "
+                    "does not tell the pose from another one that is not the same answer.")
       .def("__repr__", [](const AlignResult& r) {
         std::ostringstream out;
-        out << "AlignResult(converged=" << (r.converged ? "True" : "False") << ", stop_reason='"
+        out << "AlignResult(status='" << verdict_name(r.status)
+            << "', reliable=" << (r.reliable ? "True" : "False")
+            << ", converged=" << (r.converged ? "True" : "False") << ", stop_reason='"
             << choice_name(r.stop_reason, kStopReasons) << "', iterations=" << r.iterations
             << ", fitness=" << r.fitness << ", correlation=" << r.correlation
             << ", confidence=" << r.confidence << ", inliers=" << r.inliers

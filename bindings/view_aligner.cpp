@@ -189,6 +189,28 @@ score : float
       .def_readonly("score", &ViewSupport::score)
       .def("__repr__", [](const ViewSupport& s) { return repr(s); });
 
+  py::class_<ViewAlternative>(m, "ViewAlternative", R"doc(
+Another pose of the reference that the current view supports about as well as the returned
+one: ``T_current_reference`` (4x4), ``confidence`` (calibrated), ``score`` (uncalibrated),
+``rotation_apart`` (radians from the returned pose), ``translation_apart`` (metres between
+the reference centroids of the two poses).
+)doc")
+      .def_property_readonly(
+          "T_current_reference",
+          [](const ViewAlternative& a) { return Transform(a.T_current_reference); })
+      .def_readonly("confidence", &ViewAlternative::confidence)
+      .def_readonly("score", &ViewAlternative::score)
+      .def_readonly("rotation_apart", &ViewAlternative::rotation_apart, "Radians.")
+      .def_readonly("translation_apart", &ViewAlternative::translation_apart, "Metres.")
+      .def_readonly("symmetric", &ViewAlternative::symmetric)
+      .def("__repr__", [](const ViewAlternative& a) {
+        std::ostringstream out;
+        out << "ViewAlternative(confidence=" << a.confidence << ", score=" << a.score
+            << ", rotation_apart=" << a.rotation_apart
+            << ", translation_apart=" << a.translation_apart << ")";
+        return out.str();
+      });
+
   py::class_<ViewAlignResult>(m, "ViewAlignResult", R"doc(
 Outcome of ``align_views``.
 
@@ -196,12 +218,41 @@ Attributes
 ----------
 T_current_reference : ndarray (4, 4)
     Maps reference points into the current view's coordinates.
-converged : bool
-    status == 'converged'; whether the pose is right is what ``support.score`` says.
+reliable : bool
+    The verdict: True when status is 'reliable' (confidence at least RELIABLE_CONFIDENCE,
+    no alternative as good, the search finished in time, the voxel in range). The one
+    field to check before acting on the pose.
 status : str
-    'converged'; 'no_support' (no pose the search tried is supported anywhere in the
-    current view: the views do not overlap, or too little for the search); or
-    'max_seconds' (the budget ran out: the best pose found in time).
+    The verdict in one word: 'reliable'; 'ambiguous' (an alternative scores as well);
+    'doubtful' (confidence under RELIABLE_CONFIDENCE); 'undetermined' (a direction of the
+    pose left free: its covariance is wider than 5 degrees or 10 mm); 'no_support' (no pose the search
+    tried is supported: the views share nothing, or too little for the search);
+    'max_seconds' (the budget ran out: the best pose found in time); 'bad_scale' (a voxel
+    over half or under 1/1000 of the reference's typical size).
+determined : bool
+    The current view pins the pose down: two standard deviations of the covariance
+    within 5 degrees and, at the reference's centroid, 10 mm.
+confidence : float
+    The probability that the pose is right, in [0, 1]: score through the calibration map
+    fitted on the calibration set (docs/trust.md).
+score : float
+    The verification's score, uncalibrated, in [0, 1]: confirmed / sqrt(visible x
+    checked) over at most 8000 reference points, times support.fitness (docs/trust.md).
+covariance : ndarray (6, 6)
+    Covariance of the pose error: rotation vector (rad) then translation (m) of a left
+    perturbation T_true = exp(delta) T_current_reference, current frame.
+alternatives : list of ViewAlternative
+    Other poses (over 5 degrees or a voxel apart) scoring within 0.05 of this one, ICP
+    refined, best first, at most 3.
+ambiguous : bool
+    True when there is an alternative that is not symmetric (the same answer up to the
+    reference's own symmetry).
+inliers, inlier_fraction, inlier_rmse, inlier_distance : int, float, float, float
+    Checked reference points within inlier_distance (one voxel, metres) of their nearest
+    current point, their share of the checked points, and their RMS distance (metres).
+converged : bool
+    The search ran to its end within max_seconds. Says nothing of whether the pose is
+    right: ``reliable`` does.
 support : ViewSupport
     Of the returned pose.
 correlation : float
@@ -221,18 +272,22 @@ hypotheses : list of (ndarray (4, 4), ViewSupport)
       .def_property_readonly(
           "T_current_reference",
           [](const ViewAlignResult& r) { return Transform(r.T_current_reference); })
+      .def_readonly("reliable", &ViewAlignResult::reliable)
+      .def_property_readonly(
+          "status", [](const ViewAlignResult& r) { return std::string(verdict_name(r.status)); })
+      .def_readonly("determined", &ViewAlignResult::determined)
+      .def_readonly("confidence", &ViewAlignResult::confidence)
+      .def_readonly("score", &ViewAlignResult::score)
+      .def_property_readonly(
+          "covariance",
+          [](const ViewAlignResult& r) { return Eigen::Matrix<double, 6, 6>(r.covariance); })
+      .def_readonly("alternatives", &ViewAlignResult::alternatives)
+      .def_readonly("ambiguous", &ViewAlignResult::ambiguous)
+      .def_readonly("inliers", &ViewAlignResult::inliers)
+      .def_readonly("inlier_fraction", &ViewAlignResult::inlier_fraction)
+      .def_readonly("inlier_rmse", &ViewAlignResult::inlier_rmse)
+      .def_readonly("inlier_distance", &ViewAlignResult::inlier_distance)
       .def_readonly("converged", &ViewAlignResult::converged)
-      .def_property_readonly("status",
-                             [](const ViewAlignResult& r) {
-                               switch (r.status) {
-                                 case ViewAlignStatus::converged:
-                                   return "converged";
-                                 case ViewAlignStatus::no_support:
-                                   return "no_support";
-                                 default:
-                                   return "max_seconds";
-                               }
-                             })
       .def_readonly("support", &ViewAlignResult::support)
       .def_readonly("correlation", &ViewAlignResult::correlation)
       .def_readonly("scale", &ViewAlignResult::scale)
@@ -242,8 +297,10 @@ hypotheses : list of (ndarray (4, 4), ViewSupport)
       .def_readonly("hypotheses", &ViewAlignResult::hypotheses)
       .def("__repr__", [](const ViewAlignResult& r) {
         std::ostringstream out;
-        out << "ViewAlignResult(converged=" << (r.converged ? "True" : "False")
-            << ", score=" << r.support.score << ", voxel_size=" << r.scale.voxel_size << ")";
+        out << "ViewAlignResult(status='" << verdict_name(r.status)
+            << "', reliable=" << (r.reliable ? "True" : "False") << ", confidence=" << r.confidence
+            << ", score=" << r.score << ", converged=" << (r.converged ? "True" : "False")
+            << ", voxel_size=" << r.scale.voxel_size << ")";
         return out.str();
       });
 

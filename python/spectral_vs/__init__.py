@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 
 from spectral_vs._core import (
+    RELIABLE_CONFIDENCE,
     SINGLE_VIEW_THRESHOLD,
     AlignAlternative,
     AlignIteration,
@@ -42,6 +43,7 @@ from spectral_vs._core import (
     VerificationParams,
     ViewAlignParams,
     ViewAlignResult,
+    ViewAlternative,
     ViewScale,
     ViewSupport,
     VoxelGrid,
@@ -60,6 +62,7 @@ from spectral_vs._core import (
     load_organized,
     make_grid_spec,
     phase_correlation,
+    pose_covariance,
     real_spherical_harmonics,
     refine_rotation,
     rotation_angle,
@@ -131,6 +134,7 @@ def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
 
 __all__ = [
     "CONFIDENCE_THRESHOLD",
+    "RELIABLE_CONFIDENCE",
     "SINGLE_VIEW_THRESHOLD",
     "AlignAlternative",
     "AlignIteration",
@@ -167,6 +171,7 @@ __all__ = [
     "VerificationParams",
     "ViewAlignParams",
     "ViewAlignResult",
+    "ViewAlternative",
     "ViewScale",
     "ViewSupport",
     "VoxelGrid",
@@ -189,6 +194,7 @@ __all__ = [
     "load_organized",
     "make_grid_spec",
     "phase_correlation",
+    "pose_covariance",
     "pose_error",
     "real_spherical_harmonics",
     "refine_rotation",

@@ -668,9 +668,23 @@ class AlignResult:
     @property
     def single_view(self) -> bool: ...
     @property
-    def confidence(self) -> float: ...  # in [0, 1]
+    def reliable(self) -> bool: ...
+    @property
+    # "reliable", "ambiguous", "doubtful", "undetermined", "no_support", "max_seconds", "bad_scale",
+    # "unverified"
+    def status(self) -> str: ...
+    @property
+    def determined(self) -> bool: ...
+    @property
+    def confidence(self) -> float: ...  # calibrated, in [0, 1]
+    @property
+    def score(self) -> float: ...  # uncalibrated, in [0, 1]
+    @property
+    def covariance(self) -> _Array: ...  # (6, 6): rotation vector (rad), translation (m)
     @property
     def inliers(self) -> int: ...
+    @property
+    def inlier_fraction(self) -> float: ...
     @property
     def inlier_rmse(self) -> float: ...  # metres
     @property
@@ -688,6 +702,8 @@ class AlignAlternative:
     @property
     def confidence(self) -> float: ...
     @property
+    def score(self) -> float: ...
+    @property
     def inliers(self) -> int: ...
     @property
     def inlier_rmse(self) -> float: ...  # metres
@@ -695,6 +711,8 @@ class AlignAlternative:
     def rotation_apart(self) -> float: ...  # radians
     @property
     def translation_apart(self) -> float: ...  # metres
+    @property
+    def symmetric(self) -> bool: ...
 
 class PoseVerification:
     """The scene's support of one model pose (verify_pose)."""
@@ -719,6 +737,11 @@ class PoseVerification:
     def confidence(self) -> float: ...
 
 CONFIDENCE_THRESHOLD: float
+RELIABLE_CONFIDENCE: float
+
+def pose_covariance(
+    model: PointCloud, scene: PointCloud, T_scene_model: Any, voxel_size: float
+) -> _Array: ...  # (6, 6)
 
 def _verify_pose(
     model: PointCloud,
@@ -886,15 +909,54 @@ class ViewSupport:
     @property
     def score(self) -> float: ...
 
+class ViewAlternative:
+    """Another pose of the reference that the current view supports about as well."""
+
+    @property
+    def T_current_reference(self) -> _Array: ...  # (4, 4)
+    @property
+    def confidence(self) -> float: ...
+    @property
+    def score(self) -> float: ...
+    @property
+    def rotation_apart(self) -> float: ...  # radians
+    @property
+    def translation_apart(self) -> float: ...  # metres
+    @property
+    def symmetric(self) -> bool: ...
+
 class ViewAlignResult:
     """Outcome of align_views."""
 
     @property
     def T_current_reference(self) -> _Array: ...  # (4, 4)
     @property
-    def converged(self) -> bool: ...
+    def reliable(self) -> bool: ...
     @property
-    def status(self) -> str: ...  # "converged", "no_support" or "max_seconds"
+    # "reliable", "ambiguous", "doubtful", "undetermined", "no_support", "max_seconds", "bad_scale"
+    def status(self) -> str: ...
+    @property
+    def determined(self) -> bool: ...
+    @property
+    def confidence(self) -> float: ...  # calibrated, in [0, 1]
+    @property
+    def score(self) -> float: ...  # uncalibrated, in [0, 1]
+    @property
+    def covariance(self) -> _Array: ...  # (6, 6): rotation vector (rad), translation (m)
+    @property
+    def alternatives(self) -> list[ViewAlternative]: ...
+    @property
+    def ambiguous(self) -> bool: ...
+    @property
+    def inliers(self) -> int: ...
+    @property
+    def inlier_fraction(self) -> float: ...
+    @property
+    def inlier_rmse(self) -> float: ...  # metres
+    @property
+    def inlier_distance(self) -> float: ...  # metres
+    @property
+    def converged(self) -> bool: ...
     @property
     def support(self) -> ViewSupport: ...
     @property

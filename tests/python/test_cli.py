@@ -115,9 +115,12 @@ def test_align_text_output_and_progress(case, capsys):
     assert len(aligning) == 1
     assert aligning[0].startswith(f"aligning ({voxel_mm:.3g} mm voxels (derived), global search")
     assert all(re.search(r"\d+ (ms|s)$", line) for line in lines), err
-    # The confidence tells whether to take the pose, with the threshold it is read against.
-    match = re.search(r"confidence ([\d.]+) \(taken as right; threshold 0.89\)", out)
-    assert match and float(match.group(1)) >= 0.89, out
+    # The verdict tells whether to take the pose, with the threshold it is read against.
+    match = re.search(r"^reliable: confidence ([\d.]+) \(reliable at ([\d.]+) or more", out, re.M)
+    assert match, out
+    assert float(match.group(2)) == pytest.approx(svs.RELIABLE_CONFIDENCE)
+    assert float(match.group(1)) >= svs.RELIABLE_CONFIDENCE
+    assert "converged" not in out
 
 
 def test_align_json_reports_the_confidence_inliers_and_the_voxel_used(case, capsys):
@@ -127,7 +130,12 @@ def test_align_json_reports_the_confidence_inliers_and_the_voxel_used(case, caps
     report = json.loads(out)
     assert code == 0
     assert report["voxel_size_m"] == pytest.approx(0.008)
-    assert report["confidence"] >= svs.CONFIDENCE_THRESHOLD and report["confident"] is True
+    assert report["reliable"] is True and report["status"] == "reliable"
+    assert report["confidence"] >= svs.RELIABLE_CONFIDENCE
+    # The covariance: 6 x 6, symmetric, its deviations under the 8 mm voxel's half.
+    covariance = np.array(report["covariance"])
+    assert covariance.shape == (6, 6) and np.allclose(covariance, covariance.T)
+    assert max(report["rotation_std_deg"]) < 1.0 and max(report["translation_std_mm"]) < 4.0
     # Inliers: model points within the inlier distance (one voxel) of the scene; the scene
     # is an independent sample with 1 mm noise, so their RMSE is a few mm, under a voxel.
     assert report["inlier_distance_mm"] == pytest.approx(8.0, abs=1e-6)
@@ -152,7 +160,7 @@ def test_viewpoint_is_a_deprecated_alias_of_sensor_origin(case, capsys):
 def test_align_quiet_prints_no_progress(case, capsys):
     code, out, err = run(capsys, "align", case["model"], case["scene"], "--quiet")
     assert code == 0
-    assert "converged after" in out
+    assert "search ended normally" in out and "reliable: confidence" in out
     assert err == ""
 
 
@@ -231,12 +239,25 @@ def test_wrong_ground_truth_exits_1(case, capsys, tmp_path):
     assert report["rotation_error_deg"] == pytest.approx(20.0, abs=2.0)
 
 
-def test_not_converged_exits_1(case, capsys):
+def test_an_unfinished_search_exits_1_with_the_reason(case, capsys):
     code, out, _ = run(
         capsys, "align", case["model"], case["scene"], "--quiet", "--paper", "--max-iterations", "1"
     )
     assert code == 1
-    assert "NOT converged after 1 iteration," in out
+    assert "search stopped (max_iterations), 1 iteration of Algorithm 1" in out
+    assert "; not reliable: " in out
+
+
+def test_a_wrong_object_exits_1(case, data_dir, capsys):
+    """The Stanford bunny's scan aligned into the box and ball: no pose is right, and the
+    command must not exit 0 (the verdict, not the search's ending, decides)."""
+    code, out, _ = run(
+        capsys, "align", str(data_dir / "bun0.pcd"), case["scene"], "--quiet", "--json"
+    )
+    report = json.loads(out)
+    assert code == 1
+    assert report["reliable"] is False and report["passed"] is False
+    assert report["status"] != "reliable"
 
 
 def test_missing_file_exits_2_and_names_it(case, capsys, tmp_path):
@@ -391,7 +412,8 @@ def test_align_views_json_recovers_the_pose(view_pair, capsys):
     )
     report = json.loads(out)
     assert code == 0 and err == ""
-    assert report["status"] == "converged" and report["passed"] is True
+    assert report["status"] == "reliable" and report["reliable"] is True
+    assert report["passed"] is True
     T = np.array(report["T_current_reference"])
     center = view_pair["reference_points"].mean(axis=0)
     rotation_error, translation_error = errors(T, view_pair["T"], center)
@@ -400,8 +422,11 @@ def test_align_views_json_recovers_the_pose(view_pair, capsys):
     assert report["rotation_error_deg"] == pytest.approx(rotation_error, abs=1e-6)
     assert report["translation_error_mm"] == pytest.approx(translation_error, abs=0.2)
     # A right pose of two views that share 40-80% is well supported (docs/views.md).
-    assert report["score"] > 0.1
-    assert report["score"] == pytest.approx(report["fitness"] * report["overlap"], rel=1e-9)
+    assert report["support_score"] > 0.1
+    assert report["support_score"] == pytest.approx(
+        report["fitness"] * report["overlap"], rel=1e-9
+    )
+    assert report["confidence"] >= svs.RELIABLE_CONFIDENCE
     assert report["hypotheses_checked"] == svs.ViewAlignParams().hypotheses
     assert 0 < report["voxel_size_m"] < report["search_voxel_size_m"]
 
@@ -420,7 +445,8 @@ def test_align_views_text_output_progress_and_the_aligned_reference(view_pair, c
     )
     assert code == 0
     assert "T_current_reference" in out
-    assert re.search(r"converged: support score [\d.]+ \(fitness [\d.]+, overlap [\d.]+\)", out)
+    assert re.search(r"^reliable: confidence [\d.]+", out, re.M), out
+    assert re.search(r"support score [\d.]+ \(fitness [\d.]+, overlap [\d.]+\)", out)
     lines = err.strip().splitlines()
     assert lines[0].startswith("loading reference reference.pcd ...")
     assert all(re.search(r"\d+ (ms|s)$", line) for line in lines), err

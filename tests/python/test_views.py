@@ -125,8 +125,9 @@ def test_views_that_share_nothing_say_so(table_pairs):
     points = np.column_stack([plane, np.full(3000, 1.0)])
     away = svs.PointCloud(points, np.tile([0.0, 0.0, 1.0], (3000, 1)))
     result = svs.align_views(pair.reference, away)
-    assert result.status == "no_support" and not result.converged
-    assert result.support.confirmed == 0
+    assert result.status == "no_support" and not result.reliable
+    assert result.converged  # the search ran to its end: it found nothing
+    assert result.support.confirmed == 0 and result.confidence == 0.0
 
 
 def test_a_prior_is_kept_when_right_and_replaced_when_wrong(table_pairs):

@@ -15,6 +15,7 @@
 #include "alignment/scale.hpp"
 #include "alignment/scene_preparation.hpp"
 #include "alignment/stages.hpp"
+#include "alignment/verdict_detail.hpp"
 #include "alignment/verifier.hpp"
 #include "common/checks.hpp"
 
@@ -50,7 +51,11 @@ struct Prepared {
         correlation(scene_coefficients, model_coefficients, params.scene.bandwidth, true),
         view(single_view_image(scene, params)),
         viewpoint(view ? std::optional<Eigen::Vector3d>(scene_sensor_origin(params))
-                       : std::nullopt) {}
+                       : std::nullopt) {
+    // The verification of the global search's poses and of the returned one.
+    if (params.verification.verify || params.search.global_search)
+      verifier.emplace(scene, params.scene.voxel_size, viewpoint);
+  }
   Prepared(const Prepared&) = delete;
   Prepared& operator=(const Prepared&) = delete;
 
@@ -74,6 +79,7 @@ struct Prepared {
   So3Correlation correlation;
   const std::optional<RangeImage> view;
   const std::optional<Eigen::Vector3d> viewpoint;
+  std::optional<Verifier> verifier;
 };
 
 // The paper's mode: Algorithm 1 from the initial guess, on the grid over the whole scene
@@ -98,10 +104,8 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
                               source, params.local.max_iterations);
   // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
-  if (params.verification.verify) {
-    set_verification(result, Verifier(scene, params.scene.voxel_size, prepared.viewpoint)
-                                 .verify(model, result.T_scene_model));
-  }
+  if (params.verification.verify)
+    set_verification(result, prepared.verifier->verify(model, result.T_scene_model));
   return result;
 }
 
@@ -356,7 +360,7 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
   AlignResult best =
       refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), window);
   best.search_voxel_size = search_voxel;
-  const Verifier verifier(scene, params.scene.voxel_size, prepared.viewpoint);
+  const Verifier& verifier = *prepared.verifier;
   set_verification(best, verifier.verify(model, best.T_scene_model));
   if (best.stop_reason != AlignStopReason::max_seconds &&
       params.verification.max_alternatives > 0) {
@@ -398,6 +402,13 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
                            : align_from_guess(model, scene, params, moving, prepared, deadline);
   result.voxel_size = params.scene.voxel_size;
   result.single_view = prepared.view.has_value();
+  // The last stage: the verdict.
+  if (params.verification.verify || params.search.global_search) {
+    judge(result, model, *prepared.verifier, typical_size(model.points()),
+          typical_size(scene.points()));
+  } else {
+    leave_unjudged(result);
+  }
   return result;
 }
 

@@ -9,7 +9,9 @@
 #include "alignment/fitness_map.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/range_image.hpp"
+#include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
+#include "alignment/verdict_detail.hpp"
 #include "alignment/verifier.hpp"
 #include "common/checks.hpp"
 
@@ -173,10 +175,15 @@ struct ModelAligner::Impl {
     timings.records = loop_timings.records;
     t = Clock::now();
     result.fitness = fitness(scene, pose);
+    result.voxel_size = params.scene.voxel_size;
     if (params.verification.verify) {
-      detail::set_verification(
-          result, detail::Verifier(scene, params.scene.voxel_size, detail::declared_viewpoint(params))
-                      .verify(model, result.T_scene_model));
+      const detail::Verifier verifier(scene, params.scene.voxel_size,
+                                      detail::declared_viewpoint(params));
+      detail::set_verification(result, verifier.verify(model, result.T_scene_model));
+      detail::judge(result, model, verifier, detail::typical_size(model.points()),
+                    detail::typical_size(scene.points()));
+    } else {
+      detail::leave_unjudged(result);
     }
     timings.fitness = seconds_since(t);
     return result;

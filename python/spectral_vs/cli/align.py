@@ -27,6 +27,7 @@ from spectral_vs.cli.common import (
     add_save_aligned,
     add_sensor_origin,
     check_paths,
+    covariance_report,
     describe_transform,
     ground_truth_errors,
     load_clouds,
@@ -34,6 +35,7 @@ from spectral_vs.cli.common import (
     read_transform,
     save_moved,
     sensor_origin_of,
+    verdict_line,
 )
 from spectral_vs.registration import derived_voxel_size, prepare
 
@@ -54,12 +56,13 @@ the files when they have them, otherwise estimated (radius 2 voxels) and turned 
 scene that is a single view from there (a depth camera's cloud) is detected and its
 hypotheses are checked against what the sensor saw (--scene-view).
 
-The result's confidence (in [0, 1]) separates right from wrong poses: at or above
-svs.CONFIDENCE_THRESHOLD the pose is taken as right (docs/experiments.md). "ambiguous"
-says that other poses, listed as alternatives, fit about as well (a symmetric object).
+Every answer carries its verdict (docs/trust.md): "reliable" (its calibrated confidence
+is at least svs.RELIABLE_CONFIDENCE and no other pose fits as well), "ambiguous" (other
+poses, listed as alternatives, fit about as well: a symmetric object), "doubtful",
+"no_support", "max_seconds" or "bad_scale" (a voxel out of range of the model's size).
 
-Exit code: 0 when the alignment converged (and is within the error limits when a ground
-truth is given), 1 when it did not, 2 on bad input."""
+Exit code: 0 when the answer is reliable (and within the error limits when a ground truth
+is given), 1 when it is not (the reason is printed), 2 on bad input."""
 
 ALIGN_EPILOG = """\
 example:
@@ -69,12 +72,6 @@ example:
 
 A transform file (--initial-guess, --ground-truth) holds 4 lines of 4 numbers, or a
 (4, 4) array saved with numpy.save (.npy)."""
-
-
-def settled(result: svs.AlignResult) -> bool:
-    """Converged, or a verified pose kept over where Algorithm 1 went: the search's
-    hypothesis (``kept_start``) or a clearly more confident alternative (``reselected``)."""
-    return bool(result.converged or result.stop_reason in ("kept_start", "reselected"))
 
 
 def add_parser(commands: Any, formatter: Any) -> None:
@@ -188,7 +185,8 @@ def _add_start_settings(settings: Any) -> None:
 def _add_output_arguments(output: Any) -> None:
     """What is printed and written."""
     add_report_arguments(
-        output, "transform, converged, confidence, inliers, alternatives, voxel, time, errors"
+        output,
+        "transform, verdict, confidence, covariance, inliers, alternatives, voxel, time, errors",
     )
     output.add_argument(
         "--plot",
@@ -247,7 +245,7 @@ def run_align(args: argparse.Namespace) -> int:
     T = np.asarray(result.T_scene_model)
     center = np.asarray(model.centroid())
     errors, within = ground_truth_errors(args, T, truth, center)
-    passed = settled(result) and within
+    passed = bool(result.reliable) and within
 
     save_moved(progress, args.save_aligned, model, T)
     clouds = (model_ready, scene_ready)
@@ -345,9 +343,13 @@ def _report(
         "correlation": float(result.correlation),
         "translation_peak": float(result.translation_peak),
         "hypothesis": int(result.hypothesis),
+        "reliable": bool(result.reliable),
+        "status": result.status,
         "confidence": float(result.confidence),
-        "confident": bool(result.confidence >= svs.CONFIDENCE_THRESHOLD),
+        "score": float(result.score),
+        **covariance_report(result.covariance),
         "inliers": int(result.inliers),
+        "inlier_fraction": float(result.inlier_fraction),
         "inlier_rmse_mm": 1000 * float(result.inlier_rmse),
         "inlier_distance_mm": 1000 * float(result.inlier_distance),
         "ambiguous": bool(result.ambiguous),
@@ -369,6 +371,7 @@ def _alternative(alternative: svs.AlignAlternative) -> dict[str, Any]:
     return {
         "T_scene_model": np.asarray(alternative.T_scene_model).tolist(),
         "confidence": float(alternative.confidence),
+        "score": float(alternative.score),
         "inliers": int(alternative.inliers),
         "inlier_rmse_mm": 1000 * float(alternative.inlier_rmse),
         "rotation_apart_deg": math.degrees(alternative.rotation_apart),
@@ -388,17 +391,20 @@ def _print_result(
         print("T_scene_model (moves MODEL coordinates into the SCENE frame, metres):")
         print(T)
     print(describe_transform(T))
-    state = "converged" if settled(result) else "NOT converged"
+    ending = "ended normally" if result.converged else f"stopped ({result.stop_reason})"
     print(
-        f"{state} after {_count(result.iterations, 'iteration')}, fitness {result.fitness:.3f}, "
-        f"correlation {result.correlation:.3f}, {1000 * result.voxel_size:.3g} mm voxels, "
-        f"{_duration(timings['align'])}"
+        f"search {ending}, {_count(result.iterations, 'iteration')} of Algorithm 1, fitness "
+        f"{result.fitness:.3f}, correlation {result.correlation:.3f}, "
+        f"{1000 * result.voxel_size:.3g} mm voxels, {_duration(timings['align'])}"
     )
-    verdict = "taken as right" if result.confidence >= svs.CONFIDENCE_THRESHOLD else "doubtful"
+    print(verdict_line(result))
+    deviations = covariance_report(result.covariance)
     print(
-        f"confidence {result.confidence:.3f} ({verdict}; threshold "
-        f"{svs.CONFIDENCE_THRESHOLD:g}), {result.inliers} inliers within "
-        f"{1000 * result.inlier_distance:.3g} mm, RMSE {1000 * result.inlier_rmse:.2f} mm"
+        f"{result.inliers} inliers within {1000 * result.inlier_distance:.3g} mm "
+        f"({100 * result.inlier_fraction:.0f}% of the model), RMSE "
+        f"{1000 * result.inlier_rmse:.2f} mm; standard deviation "
+        f"{max(deviations['rotation_std_deg']):.2g} deg, "
+        f"{max(deviations['translation_std_mm']):.2g} mm"
         + (", single view" if result.single_view else "")
     )
     if result.ambiguous:

@@ -27,6 +27,44 @@ MAX_SERVO_ERROR_MM = 5.0
 MAX_SERVO_ERROR_DEG = 1.0
 
 
+#: Why an answer is not reliable, by status: what the command line prints beside it.
+VERDICT_REASONS = {
+    "ambiguous": "other poses fit about as well (a symmetric object, or a view that hides "
+    "what tells them apart)",
+    "doubtful": "the scene supports the pose too little",
+    "undetermined": "the scene leaves a direction of the pose free (a plane on a plane): "
+    "its covariance is wider than 5 degrees or 10 mm",
+    "no_support": "the scene supports no part of the answer (nothing shared)",
+    "max_seconds": "the time budget ran out before the search ended",
+    "bad_scale": "the voxel is over half, or under 1/1000, of the cloud's typical size",
+    "unverified": "the verification was turned off",
+}
+
+
+def verdict_line(result: Any) -> str:
+    """The verdict of an AlignResult or a ViewAlignResult in words: its status, its
+    calibrated confidence and, when not reliable, why."""
+    line = (
+        f"{result.status}: confidence {result.confidence:.3f} "
+        f"(reliable at {svs.RELIABLE_CONFIDENCE:g} or more with no alternative as good)"
+    )
+    if not result.reliable:
+        line += f"; not reliable: {VERDICT_REASONS.get(result.status, result.status)}"
+    return line
+
+
+def covariance_report(covariance: Any) -> dict[str, Any]:
+    """The --json form of a 6x6 pose covariance (rotation vector in rad, then translation
+    in m), with its standard deviations in degrees and millimetres."""
+    matrix = np.asarray(covariance, dtype=float)
+    deviations = np.sqrt(np.clip(np.diag(matrix), 0.0, None))
+    return {
+        "covariance": matrix.tolist(),
+        "rotation_std_deg": np.degrees(deviations[:3]).tolist(),
+        "translation_std_mm": (1000 * deviations[3:]).tolist(),
+    }
+
+
 class InputError(Exception):
     """Bad input on the command line; the message names the argument (exit code 2)."""
 

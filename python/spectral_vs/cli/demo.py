@@ -30,6 +30,7 @@ from spectral_vs.cli.common import (
     describe_transform,
     read_cloud,
     rotation_about,
+    verdict_line,
 )
 from spectral_vs.cli.translate import estimate_translation
 from spectral_vs.data import MILK_MODEL, MILK_SCENE, milk_split, synthetic_scene
@@ -172,11 +173,14 @@ def run_alignment_demo(args: argparse.Namespace) -> int:
     print(
         f"Algorithm 1: {_count(result.iterations, 'iteration')} "
         f"({STOP_REASONS[result.stop_reason]}), {_count(result.icp_iterations, 'ICP step')}; "
-        f"fitness {result.fitness:.3f}, confidence {result.confidence:.3f}, "
-        f"correlation {result.correlation:.3f}, {_duration(elapsed)}"
+        f"fitness {result.fitness:.3f}, correlation {result.correlation:.3f}, "
+        f"{_duration(elapsed)}"
     )
+    print(verdict_line(result))
 
-    status = 0 if _within(errors, limits) or not args.check else 1
+    # The verdict is what a user acts on: an unreliable answer fails the demo whether or
+    # not it happens to be right; --check also fails it on the ground truth.
+    status = 0 if result.reliable and (_within(errors, limits) or not args.check) else 1
     if plotting is None:
         return status
     convergence = args.output / "convergence.png"

@@ -23,12 +23,14 @@ from spectral_vs.cli.common import (
     add_save_aligned,
     add_sensor_origin,
     check_paths,
+    covariance_report,
     describe_transform,
     ground_truth_errors,
     load_clouds,
     print_errors,
     read_transform,
     save_moved,
+    verdict_line,
 )
 
 DESCRIPTION = """\
@@ -42,13 +44,13 @@ R p + t in CURRENT's coordinates: for two camera frames, the reference camera's 
 the current camera's frame. Units: metres; every length (voxel, search voxel) is derived
 from the views unless given.
 
-The support score (in [0, 1]: the share of the reference that the current view confirms,
-times its overlap) tells a right pose from a wrong one within a kind of scene; the
-status says whether any pose was supported at all.
+Every answer carries its verdict (docs/trust.md): "reliable" (its calibrated confidence
+is at least svs.RELIABLE_CONFIDENCE and no other pose fits as well), "ambiguous",
+"doubtful", "no_support" (the views share nothing, or too little to find it),
+"max_seconds" or "bad_scale".
 
-Exit code: 0 when the registration converged (and is within the error limits when a
-ground truth is given), 1 when it found no supported pose or ran out of time, 2 on bad
-input."""
+Exit code: 0 when the answer is reliable (and within the error limits when a ground truth
+is given), 1 when it is not (the reason is printed), 2 on bad input."""
 
 EPILOG = """\
 example:
@@ -156,7 +158,7 @@ def run_views(args: argparse.Namespace) -> int:
     T = np.asarray(result.T_current_reference)
     center = np.asarray(reference.centroid())
     errors, within = ground_truth_errors(args, T, truth, center)
-    passed = bool(result.converged) and within
+    passed = bool(result.reliable) and within
     save_moved(progress, args.save_aligned, reference, T)
 
     if args.json:
@@ -193,9 +195,25 @@ def _report(
     support = result.support
     report: dict[str, Any] = {
         "T_current_reference": np.asarray(result.T_current_reference).tolist(),
+        "reliable": bool(result.reliable),
         "status": result.status,
+        "confidence": float(result.confidence),
+        "score": float(result.score),
+        **covariance_report(result.covariance),
+        "ambiguous": bool(result.ambiguous),
+        "alternatives": [
+            {
+                "T_current_reference": np.asarray(a.T_current_reference).tolist(),
+                "confidence": float(a.confidence),
+                "score": float(a.score),
+            }
+            for a in result.alternatives
+        ],
+        "inliers": int(result.inliers),
+        "inlier_fraction": float(result.inlier_fraction),
+        "inlier_rmse_mm": 1000 * float(result.inlier_rmse),
         "converged": bool(result.converged),
-        "score": float(support.score),
+        "support_score": float(support.score),
         "fitness": float(support.fitness),
         "overlap": float(support.overlap),
         "confirmed": int(support.confirmed),
@@ -233,8 +251,9 @@ def _print_result(
     print(describe_transform(T))
     support = result.support
     source = "the prior" if result.hypothesis == -1 else f"hypothesis {result.hypothesis}"
+    print(verdict_line(result))
     print(
-        f"{result.status}: support score {support.score:.3f} (fitness {support.fitness:.2f}, "
+        f"support score {support.score:.3f} (fitness {support.fitness:.2f}, "
         f"overlap {support.overlap:.2f}), {source} of {len(result.hypotheses)} checked"
         + (f" ({result.windows} windows searched)" if result.windows else "")
         + f", {1000 * result.scale.voxel_size:.3g} mm voxels, {_duration(timings['align'])}"

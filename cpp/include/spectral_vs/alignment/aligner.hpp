@@ -4,6 +4,7 @@
 /// II-D, eq. 16-17) and, beyond the paper, a global rotation search that makes the
 /// result independent of the initial rotation.
 
+#include <spectral_vs/alignment/verdict.hpp>
 #include <spectral_vs/alignment/verification.hpp>
 #include <spectral_vs/representation/point_cloud.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
@@ -246,20 +247,26 @@ struct AlignIteration {
 /// object's, or one whose distinguishing part the view does not show).
 struct AlignAlternative {
   Transform T_scene_model = Transform::Identity();
-  double confidence = 0.0;         ///< As AlignResult::confidence, for this pose.
+  double confidence = 0.0;         ///< As AlignResult::confidence (calibrated), for this pose.
+  double score = 0.0;              ///< As AlignResult::score (the uncalibrated score).
   int inliers = 0;                 ///< As AlignResult::inliers.
   double inlier_rmse = 0.0;        ///< As AlignResult::inlier_rmse, metres.
   double rotation_apart = 0.0;     ///< Rotation from the returned pose, radians.
   double translation_apart = 0.0;  ///< Model centroid from the returned pose's, metres.
+  /// The model maps onto itself by the turn from the returned pose to this one (its own
+  /// score against itself at least kSymmetricSelfFit): the same answer up to the object's
+  /// symmetry, which does not make the result ambiguous.
+  bool symmetric = false;
 };
 
 /// Outcome of `align`.
 struct AlignResult {
   Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
-  /// The stop rule (eq. 17) held in the Algorithm 1 run that produced the returned pose,
-  /// before its iteration limit (and, with global search, every run finished in time).
-  /// With global search that run started at the kept hypothesis (`hypothesis`); the pose
-  /// is then turned about a flat axis and ICP-refined (polish_evaluations, icp_iterations).
+  /// The optimisation ended normally: stop_reason is converged, kept_start or reselected
+  /// (not max_iterations nor max_seconds). It says nothing of whether the pose is right:
+  /// `reliable` does. With global search the Algorithm 1 run started at the kept hypothesis
+  /// (`hypothesis`); the pose is then turned about a flat axis and ICP-refined
+  /// (polish_evaluations, icp_iterations).
   bool converged = false;
   AlignStopReason stop_reason = AlignStopReason::max_iterations;  ///< Why it stopped.
   int iterations = 0;  ///< Iterations of that run: history.size().
@@ -290,13 +297,29 @@ struct AlignResult {
   /// Every iteration of that run; history.back().T_scene_model is where Algorithm 1
   /// ended, T_scene_model that pose after the polish and ICP (equal without them).
   std::vector<AlignIteration> history;
-  /// The confidence that the pose is right, in [0, 1] (verify_pose, confidence_of): the
-  /// share of the model points the sensor would see that lie within half a voxel of a
-  /// scene point turned the same way, less the share it saw through. Above
-  /// kConfidenceThreshold, the pose is right (docs/experiments.md measures how often).
+  /// The verdict: true when status is Verdict::reliable (confidence at least
+  /// kReliableConfidence, no alternative as good, the search finished in time, the voxel
+  /// in range). The one field to check before acting on T_scene_model.
+  bool reliable = false;
+  Verdict status = Verdict::doubtful;  ///< The verdict in one word (verdict.hpp).
+  /// The scene pins the pose down: pose_determined of the covariance at the model's
+  /// centroid (false when the verification is off).
+  bool determined = false;
+  /// The probability that the pose is right (within 5 degrees and 10 mm), in [0, 1]: `score`
+  /// through the calibration map fitted on the calibration set (calibrated_confidence).
   double confidence = 0.0;
-  /// Model points within inlier_distance of their nearest scene point at the pose.
+  /// The verification's score, uncalibrated, in [0, 1] (verify_pose, confidence_of): the
+  /// share of the model points the sensor would see that lie within half a voxel of a
+  /// scene point turned the same way, less the share it saw through.
+  double score = 0.0;
+  /// Covariance of the pose error (rotation vector in radians, then translation in metres,
+  /// T_true = exp(delta) T_scene_model, scene frame): pose_covariance at the pose. Zero
+  /// when the verification is off.
+  PoseCovariance covariance = PoseCovariance::Zero();
+  /// Model points (as aligned: downsampled) within inlier_distance of their nearest scene
+  /// point at the pose; inlier_fraction = inliers / model points.
   int inliers = 0;
+  double inlier_fraction = 0.0;  ///< inliers / model points, in [0, 1].
   /// Root mean square distance of the inliers to their nearest scene points, metres.
   double inlier_rmse = 0.0;
   double inlier_distance = 0.0;  ///< kInlierVoxels * voxel_size, metres.
@@ -304,8 +327,9 @@ struct AlignResult {
   /// from each other), whose confidence is within 0.05 of this one's, best first, at most
   /// AlignParams::verification.max_alternatives.
   std::vector<AlignAlternative> alternatives;
-  /// True when there is an alternative: the scene does not tell the pose apart from
-  /// another one (a symmetric object, or a view that hides its distinguishing part).
+  /// True when there is an alternative that is not `symmetric`: the scene does not tell
+  /// the pose apart from another one that is not the same answer (a view that hides the
+  /// object's distinguishing part, a near-symmetric object).
   bool ambiguous = false;
   double voxel_size = 0.0;   ///< The voxel the alignment worked at, metres (derived for 0).
   bool single_view = false;  ///< The scene was checked as a single view from sensor_origin

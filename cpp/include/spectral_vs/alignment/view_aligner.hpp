@@ -88,24 +88,65 @@ struct ViewSupport {
   double score = 0.0;
 };
 
-/// How `align_views` ended.
-enum class ViewAlignStatus {
-  converged,    ///< The search ran to its end and the kept pose has support.
-  no_support,   ///< No pose the search tried is supported anywhere in the current view:
-                ///< the views do not overlap, or too little for the search to find it.
-  max_seconds,  ///< ViewAlignParams::max_seconds ran out: the best pose found in time.
+/// Another pose of the reference that the current view supports about as well as the
+/// returned one (ViewAlignResult::alternatives).
+struct ViewAlternative {
+  Transform T_current_reference = Transform::Identity();
+  double confidence = 0.0;         ///< As ViewAlignResult::confidence (calibrated), for this pose.
+  double score = 0.0;              ///< As ViewAlignResult::score, for this pose.
+  double rotation_apart = 0.0;     ///< Rotation from the returned pose, radians.
+  double translation_apart = 0.0;  ///< Reference centroid from the returned pose's, metres.
+  bool symmetric = false;          ///< The reference maps onto itself by the turn between the two
+                                   ///< poses (as AlignAlternative::symmetric): the same answer.
 };
 
 /// Outcome of `align_views`.
 struct ViewAlignResult {
   Transform T_current_reference = Transform::Identity();  ///< Maps reference points into the
                                                           ///< current view's coordinates.
-  /// status == converged: the search ran to its end (every hypothesis and refinement
-  /// within max_seconds) and the kept pose has support. Whether it is right is
-  /// `support.score`'s to say (docs/views.md measures it).
+  /// The verdict: true when status is Verdict::reliable (confidence at least
+  /// kReliableConfidence, no alternative as good, the search finished in time, the voxel
+  /// in range). The one field to check before acting on T_current_reference.
+  bool reliable = false;
+  /// The verdict in one word: reliable, ambiguous, doubtful, no_support (no pose the
+  /// search tried is supported: the views share nothing, or too little to find it),
+  /// max_seconds (ViewAlignParams::max_seconds ran out: the best pose found in time),
+  /// bad_scale (a voxel out of range of the reference's size).
+  Verdict status = Verdict::no_support;
+  /// The current view pins the pose down: pose_determined of the covariance at the
+  /// reference's centroid.
+  bool determined = false;
+  /// The probability that the pose is right (within 5 degrees and 10 mm; for a room-scale
+  /// view, docs/trust.md gives the tolerance), in [0, 1]: `score` calibrated.
+  double confidence = 0.0;
+  /// The verification's score, uncalibrated, in [0, 1]: confirmed / sqrt(visible x
+  /// checked) x support.fitness. `checked` reference points (the prepared reference, at
+  /// most 8000 of it) are moved by the pose, `visible` of them face the current's sensor,
+  /// lie in its view and not behind what it saw, and `confirmed` of those lie within half
+  /// a voxel of the tangent plane of a current point turned the same way: the geometric
+  /// mean of the share of what the current view could see that it confirms and of the
+  /// share of the reference it confirms. The support's fitness checks the reference's
+  /// structure (off its dominant plane) against the current's depth image: a pose that
+  /// only lays a table on a table fails it.
+  double score = 0.0;
+  /// Covariance of the pose error (rotation vector in radians, then translation in metres,
+  /// T_true = exp(delta) T_current_reference, current frame); see pose_covariance.
+  PoseCovariance covariance = PoseCovariance::Zero();
+  /// Other poses (over 5 degrees or a voxel apart) whose score is within 0.05 of this one's,
+  /// each refined by the ICP; best first, at most 3.
+  std::vector<ViewAlternative> alternatives;
+  bool ambiguous = false;  ///< There is an alternative that is not `symmetric`.
+  /// Checked reference points within inlier_distance (one voxel) of their nearest current
+  /// point; inlier_fraction = inliers / checked points; inlier_rmse their RMS distance.
+  int inliers = 0;
+  double inlier_fraction = 0.0;
+  double inlier_rmse = 0.0;      ///< Metres.
+  double inlier_distance = 0.0;  ///< Metres.
+  /// The search ran to its end (every hypothesis and refinement within max_seconds). Says
+  /// nothing of whether the pose is right: `reliable` does.
   bool converged = false;
-  ViewAlignStatus status = ViewAlignStatus::no_support;  ///< Why it ended.
-  ViewSupport support;                                   ///< Of the returned pose.
+  ViewSupport support;       ///< The depth-image support of the returned pose (what ranks
+                             ///< the hypotheses).
   double correlation = 0.0;  ///< Normalised EGI correlation at the returned rotation.
   ViewScale scale;           ///< The scale it worked at.
   int hypothesis = 0;        ///< Index of the kept hypothesis (the search's, best correlated
