@@ -151,7 +151,13 @@ def prepare(
                 f"{argument}: downsampling to half of voxel_size = {voxel_size} m: {error}"
             ) from error
     if not cloud.has_normals:
-        cloud = estimate_normals(cloud, radius=2 * voxel_size, viewpoint=viewpoint)
+        try:
+            cloud = estimate_normals(cloud, radius=2 * voxel_size, viewpoint=viewpoint)
+        except ValueError as error:  # the core names the radius: say where it comes from
+            raise ValueError(
+                f"{argument}: estimating normals over a radius of 2 x voxel_size = "
+                f"{2 * voxel_size} m: {error}"
+            ) from error
     return cloud
 
 
