@@ -418,7 +418,9 @@ CASES = [
         ValueError,
         "voxel_size must be finite",
     ),
-    Case("downsample/tiny", lambda f: svs.voxel_downsample(OBJECT, 1e-300), ValueError, "too small"),
+    Case(
+        "downsample/tiny", lambda f: svs.voxel_downsample(OBJECT, 1e-300), ValueError, "too small"
+    ),
     Case(
         "downsample/huge",
         lambda f: svs.voxel_downsample(OBJECT, 1e7),
