@@ -5,12 +5,14 @@
 #include <spectral_vs/representation/depth_image.hpp>
 
 #include <pybind11/stl.h>
+#include <pybind11/warnings.h>
 
 #include <cstdint>
 #include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 namespace spectral_vs::python {
 
@@ -58,26 +60,67 @@ py::array pixel_view(const Points& rows, int height, int width, py::handle owner
   return std::move(view);
 }
 
+// The InputWarning of a depth_scale that puts most valid depths outside what a depth
+// camera measures, with the median found and the likely fix.
+template <typename Image>
+void warn_of_depth_scale(const Eigen::Map<const Image>& image, const DepthScaleCheck& check,
+                         bool explicit_scale) {
+  const bool raw = std::is_same_v<typename Image::Scalar, std::uint16_t>;
+  const double median = median_depth(image, check.depth_scale);
+  std::ostringstream message;
+  message << "depth_scale: " << check.depth_scale << " sensor units per metre"
+          << (explicit_scale ? ""
+                             : (raw ? " (the default of a uint16 image, millimetres)"
+                                    : " (the default of a float image, metres)"))
+          << " puts " << check.valid - check.plausible << " of the " << check.valid
+          << " valid depths outside " << kPlausibleMinDepth << "-" << kPlausibleMaxDepth
+          << " m of the camera (median " << median << " m); ";
+  if (median > kPlausibleMaxDepth) {
+    message << "is depth_scale too small? "
+            << (raw ? "a uint16 image in millimetres needs depth_scale=1000 (TUM RGB-D: 5000)"
+                    : "a float image in millimetres needs depth_scale=1000")
+            << ", which would put the median at " << median * check.depth_scale / 1000.0 << " m";
+  } else if (median >= kPlausibleMinDepth) {
+    message << "the depths are spread on both sides of that range: is this a depth image?";
+  } else {
+    message << "is depth_scale too large (swapped for its inverse, or applied twice)? "
+            << (raw ? "a uint16 image in millimetres needs depth_scale=1000"
+                    : "a float image in metres needs depth_scale=1 (the default)")
+            << ", which would put the median at "
+            << median * check.depth_scale / (raw ? 1000.0 : 1.0) << " m";
+  }
+  message << ". The cloud is returned as computed.";
+  py::warnings::warn(message.str().c_str(),
+                     py::module_::import("spectral_vs._core").attr("InputWarning"), 1);
+}
+
 template <typename Scalar>
 py::object from_depth(const py::array& array, const Eigen::Matrix3d& K,
                       const DepthCloudParams& params, bool organized) {
   using Image = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   auto values = py::array_t<Scalar, py::array::c_style | py::array::forcecast>::ensure(array);
   const Eigen::Map<const Image> image(values.data(), values.shape(0), values.shape(1));
+  py::object result;
+  DepthScaleCheck check;
   if (organized) {
     OrganizedCloud cloud;
     {
       py::gil_scoped_release release;
       cloud = organized_cloud_from_depth(image, K, params);
+      check = check_depth_scale(image, params.depth_scale);
     }
-    return py::cast(std::move(cloud));
+    result = py::cast(std::move(cloud));
+  } else {
+    PointCloud cloud;
+    {
+      py::gil_scoped_release release;
+      cloud = cloud_from_depth(image, K, params);
+      check = check_depth_scale(image, params.depth_scale);
+    }
+    result = py::cast(std::move(cloud));
   }
-  PointCloud cloud;
-  {
-    py::gil_scoped_release release;
-    cloud = cloud_from_depth(image, K, params);
-  }
-  return py::cast(std::move(cloud));
+  if (!check.ok()) warn_of_depth_scale(image, check, params.depth_scale.has_value());
+  return result;
 }
 
 const char* kCloudFromDepthDoc = R"doc(
@@ -102,6 +145,9 @@ K : array_like (3, 3)
 depth_scale : float, optional
     Sensor units per metre. Default: 1000 for uint16 images (millimetres: Kinect,
     RealSense, Azure Kinect; TUM RGB-D files use 5000), 1 for float images (metres).
+    When at most half of the valid depths (finite, > 0) lie within 0.05-50 m at this
+    scale, an ``InputWarning`` names depth_scale, the median depth and the likely fix
+    (a float image in millimetres needs depth_scale=1000).
 min_depth, max_depth : float
     Pixels nearer or farther, metres, are invalid (default 0 and inf: none truncated).
 stride : int
@@ -122,6 +168,11 @@ Returns
 PointCloud or OrganizedCloud
     The valid pixels in row-major order; with ``organized=True`` all of them.
 
+Warns
+-----
+InputWarning
+    When most valid depths lie outside 0.05-50 m at depth_scale (see depth_scale).
+
 Raises
 ------
 ValueError
@@ -134,6 +185,34 @@ ValueError
 }  // namespace
 
 void define_depth_image(py::module_& m) {
+  py::warnings::new_warning_type(m, "InputWarning", PyExc_UserWarning).attr("__doc__") =
+      "Input that is accepted but probably not what was meant, named by its argument: a "
+      "depth_scale that puts most depths outside 0.05-50 m, a viewpoint inside the cloud it "
+      "orients normals toward.";
+  py::class_<DepthScaleCheck>(m, "DepthScaleCheck", R"doc(
+How the depths of an image fall at a depth scale (``check_depth_scale``).
+
+Attributes
+----------
+depth_scale : float
+    The scale used, sensor units per metre.
+valid : int
+    Pixels whose depth is finite and > 0.
+plausible : int
+    Of them, those within 0.05-50 m.
+ok : bool
+    False when there are valid pixels and at most half of them are plausible.
+)doc")
+      .def_readonly("depth_scale", &DepthScaleCheck::depth_scale)
+      .def_readonly("valid", &DepthScaleCheck::valid)
+      .def_readonly("plausible", &DepthScaleCheck::plausible)
+      .def_property_readonly("ok", &DepthScaleCheck::ok)
+      .def("__repr__", [](const DepthScaleCheck& c) {
+        std::ostringstream out;
+        out << "DepthScaleCheck(depth_scale=" << c.depth_scale << ", valid=" << c.valid
+            << ", plausible=" << c.plausible << ")";
+        return out.str();
+      });
   py::class_<OrganizedCloud>(m, "OrganizedCloud", R"doc(
 The cloud of a depth image pixel by pixel (of the strided image), camera frame.
 
@@ -183,6 +262,32 @@ valid : ndarray (height, width) of bool
             << " valid pixels, " << (c.has_normals() ? "with" : "no") << " normals)";
         return out.str();
       });
+
+  m.def(
+      "check_depth_scale",
+      [](const py::handle& depth, std::optional<double> depth_scale) {
+        auto array = py::array::ensure(depth);
+        if (!array || array.ndim() != 2) throw py::value_error("depth must be a 2-D image");
+        const char kind = array.dtype().kind();
+        const auto size = array.dtype().itemsize();
+        const auto check = [&](auto scalar) {
+          using Scalar = decltype(scalar);
+          using Image = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+          auto values =
+              py::array_t<Scalar, py::array::c_style | py::array::forcecast>::ensure(array);
+          const Eigen::Map<const Image> image(values.data(), values.shape(0), values.shape(1));
+          py::gil_scoped_release release;
+          return check_depth_scale(image, depth_scale);
+        };
+        if (kind == 'u' && size == 2) return check(std::uint16_t{});
+        if (kind == 'f' && size == 4) return check(float{});
+        if (kind == 'f' && size == 8) return check(double{});
+        throw py::value_error("depth must have dtype uint16, float32 or float64, got " +
+                              std::string(py::str(array.dtype())));
+      },
+      py::arg("depth"), py::kw_only(), py::arg("depth_scale") = py::none(),
+      "How many of the image's valid depths (finite, > 0) lie within 0.05-50 m at "
+      "depth_scale (default as cloud_from_depth's): the check behind its InputWarning.");
 
   m.def(
       "cloud_from_depth",

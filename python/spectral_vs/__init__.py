@@ -24,6 +24,7 @@ from spectral_vs._core import (
     CloudFileInfo,
     DampedSolution,
     DampingParams,
+    DepthScaleCheck,
     DominantPlane,
     GlobalSearchParams,
     GridSpec,
@@ -48,6 +49,7 @@ from spectral_vs._core import (
     ViewSupport,
     VoxelGrid,
     alignment_voxel_size,
+    check_depth_scale,
     cloud_from_depth,
     damped_least_squares,
     detect_single_view,
@@ -56,7 +58,6 @@ from spectral_vs._core import (
     egi,
     egi_cell,
     egi_coefficients,
-    estimate_normals,
     fft_friendly_size,
     load_cloud_with_info,
     load_organized,
@@ -90,6 +91,7 @@ from spectral_vs.interop import from_open3d, to_open3d
 from spectral_vs.poses import PoseError, pose_error
 from spectral_vs.registration import align
 from spectral_vs.robot import RobotInterface
+from spectral_vs.sanity import InputWarning, estimate_normals
 from spectral_vs.servo import (
     ServoLog,
     ServoParams,
@@ -144,9 +146,11 @@ __all__ = [
     "CloudFileInfo",
     "DampedSolution",
     "DampingParams",
+    "DepthScaleCheck",
     "DominantPlane",
     "GlobalSearchParams",
     "GridSpec",
+    "InputWarning",
     "Kinematics",
     "LocalParams",
     "OrganizedCloud",
@@ -178,6 +182,7 @@ __all__ = [
     "align",
     "align_views",
     "alignment_voxel_size",
+    "check_depth_scale",
     "cloud_from_depth",
     "damped_least_squares",
     "detect_single_view",

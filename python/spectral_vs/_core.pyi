@@ -171,6 +171,28 @@ class OrganizedCloud:
     def valid(self) -> npt.NDArray[np.bool_]: ...  # (height, width): the rows of valid_cloud()
     def valid_cloud(self) -> PointCloud: ...
 
+class InputWarning(UserWarning):
+    """Input that is accepted but probably not what was meant, named by its argument: a
+    depth_scale that puts most depths outside 0.05-50 m, a viewpoint inside the cloud it
+    orients normals toward."""
+
+class DepthScaleCheck:
+    """How the depths of an image fall at a depth scale (``check_depth_scale``)."""
+
+    @property
+    def depth_scale(self) -> float: ...  # sensor units per metre
+    @property
+    def valid(self) -> int: ...  # pixels whose depth is finite and > 0
+    @property
+    def plausible(self) -> int: ...  # of them, within 0.05-50 m
+    @property
+    def ok(self) -> bool: ...
+
+def check_depth_scale(
+    depth: npt.ArrayLike,  # (height, width): uint16 sensor units or float32/64 metres
+    *,
+    depth_scale: float | None = None,  # units per metre; None: 1000 (uint16), 1 (float)
+) -> DepthScaleCheck: ...
 @overload
 def cloud_from_depth(
     depth: npt.ArrayLike,  # (height, width): uint16 sensor units or float32/64 metres

@@ -11,6 +11,8 @@ from __future__ import annotations
 import warnings
 from typing import Any
 
+import numpy as np
+
 from spectral_vs._core import (
     PointCloud,
     ViewAlignParams,
@@ -19,18 +21,30 @@ from spectral_vs._core import (
 )
 from spectral_vs._core import align_views as _align_views
 from spectral_vs.registration import CloudLike, as_cloud, check_viewpoint, with_overrides
+from spectral_vs.sanity import InputWarning, inside_bounding_box
 
 #: Neighbours of an estimated normal's plane fit: a count, not a radius, because a depth
 #: camera's point spacing grows with the square of the depth (2 mm at 1 m, 50 mm at 10 m).
 NORMAL_NEIGHBORS = 20
 
 
-def _view(cloud: CloudLike, argument: str, viewpoint: Any) -> PointCloud:
+def _view(cloud: CloudLike, argument: str, viewpoint: Any, origin_argument: str) -> PointCloud:
     view = as_cloud(cloud, argument)
     if len(view) == 0:
         raise ValueError(f"{argument} is empty: at least 1 finite point is needed")
     if not view.has_normals:
         view = estimate_normals(view, k_neighbors=NORMAL_NEIGHBORS, viewpoint=viewpoint)
+        if inside_bounding_box(view.points, viewpoint):
+            warnings.warn(
+                f"{origin_argument} {np.asarray(viewpoint, dtype=float).tolist()} lies inside "
+                f"the bounding box of {argument}: its estimated normals, turned toward it, "
+                f"point into the surfaces around it if {argument} is a closed model rather "
+                f"than a depth camera's view from there. Give {argument}'s sensor origin, or "
+                f"its normals (PointCloud(points, normals), e.g. from "
+                f"estimate_normals(..., orientation='outward'))",
+                InputWarning,
+                stacklevel=3,
+            )
     return view
 
 
@@ -49,8 +63,10 @@ def align_views(
     ----------
     reference, current : PointCloud, open3d.geometry.PointCloud or ndarray
         The two views, metres, as :class:`PointCloud`, Open3D clouds or (N, 3) / (N, 6)
-        arrays (points, normals). Missing normals are estimated (20 nearest neighbours)
-        and turned toward the view's sensor.
+        arrays (points, normals; the normals unit vectors, see :func:`align`). Missing
+        normals are estimated (20 nearest neighbours) and turned toward the view's sensor;
+        an ``InputWarning`` names the sensor origin when it lies inside the view's
+        bounding box (a closed model, not a view, gets normals into it).
     params : ViewAlignParams, optional
         Settings; defaults to ``ViewAlignParams()`` (every length derived from the views).
     reference_sensor_origin : array_like (3,)
@@ -107,6 +123,6 @@ def align_views(
     settings = with_overrides(params, ViewAlignParams, overrides, "view alignment setting")
     current_origin = check_viewpoint(settings.sensor_origin, "sensor_origin")
     reference_origin = check_viewpoint(reference_sensor_origin, "reference_sensor_origin")
-    reference_view = _view(reference, "reference", reference_origin)
-    current_view = _view(current, "current", current_origin)
+    reference_view = _view(reference, "reference", reference_origin, "reference_sensor_origin")
+    current_view = _view(current, "current", current_origin, "sensor_origin")
     return _align_views(reference_view, current_view, settings, prior)

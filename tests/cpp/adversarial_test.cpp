@@ -442,7 +442,7 @@ std::vector<Case> cases() {
        "voxel_size must be finite and > 0"},
       {"downsample_inf", [] { voxel_downsample(object(), kInf); },
        "voxel_size must be finite and > 0"},
-      {"downsample_tiny", [] { voxel_downsample(object(), 1e-12); }, "is too small"},
+      {"downsample_tiny", [] { voxel_downsample(object(), 1e-300); }, "is too small"},
       {"downsample_huge", [] { voxel_downsample(object(), 1e7); }, "voxel_size must be <= 1e+06"},
       {"downsample_one_point",
        [] {

@@ -338,5 +338,36 @@ TEST(CloudFromDepth, IsolatedPixelsGiveAnEmptyCloudWithNormalsButPointsWithout) 
   EXPECT_LT((points.points().row(1).transpose() - 0.6 * ray(K, 12, 9)).norm(), 1e-15);
 }
 
+// The depth scale check: 60 of 100 pixels at 0.8 m, 30 at 1.2 km read as metres (a float
+// image in millimetres), 10 without a return; at 1000 units per metre the reverse.
+TEST(DepthScale, CountsThePlausibleDepthsAndGivesTheMedian) {
+  DepthImageF depth = DepthImageF::Zero(10, 10);
+  depth.topRows(6).setConstant(0.8f);
+  depth.middleRows(6, 3).setConstant(1200.0f);
+  depth(9, 0) = std::numeric_limits<float>::quiet_NaN();
+  DepthScaleCheck check = check_depth_scale(depth);
+  EXPECT_EQ(check.depth_scale, 1.0);
+  EXPECT_EQ(check.valid, 90u);
+  EXPECT_EQ(check.plausible, 60u);
+  EXPECT_TRUE(check.ok());
+  EXPECT_NEAR(median_depth(depth), 0.8, 1e-6);
+  check = check_depth_scale(depth, 1000.0);  // 0.8 mm and 1.2 m
+  EXPECT_EQ(check.plausible, 30u);
+  EXPECT_FALSE(check.ok());
+  EXPECT_NEAR(median_depth(depth, 1000.0), 0.0008, 1e-9);
+  // Exactly half plausible is not enough; raw images default to millimetres.
+  RawDepthImage raw = RawDepthImage::Zero(4, 4);
+  raw.topRows(2).setConstant(800);    // 0.8 m
+  raw.bottomRows(2).setConstant(10);  // 1 cm
+  check = check_depth_scale(raw);
+  EXPECT_EQ(check.depth_scale, 1000.0);
+  EXPECT_EQ(check.plausible, 8u);
+  EXPECT_FALSE(check.ok());
+  EXPECT_TRUE(check_depth_scale(RawDepthImage::Zero(3, 3)).ok());  // nothing to judge
+  EXPECT_TRUE(std::isnan(median_depth(RawDepthImage::Zero(3, 3))));
+  EXPECT_THROW(check_depth_scale(raw, 0.0), std::invalid_argument);
+  EXPECT_THROW(median_depth(raw, -1.0), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace spectral_vs

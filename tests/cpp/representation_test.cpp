@@ -261,8 +261,108 @@ TEST(Preprocessing, VoxelDownsampleRefusesBadSizes) {
   const PointCloud cloud(Points::Random(10, 3) * 100.0);
   EXPECT_THROW(voxel_downsample(cloud, 0.0), std::invalid_argument);
   EXPECT_THROW(voxel_downsample(cloud, NAN), std::invalid_argument);
-  EXPECT_THROW(voxel_downsample(cloud, 1e-6), std::invalid_argument);  // index overflow
+  EXPECT_THROW(voxel_downsample(cloud, 1e-20), std::invalid_argument);  // index past 2^62
   EXPECT_THROW(voxel_downsample(PointCloud(), 0.01), std::invalid_argument);
+  // Voxel indices are per axis: a box of 1e8^3 voxels (PCL's int index overflowed) is fine.
+  EXPECT_EQ(voxel_downsample(cloud, 1e-6).size(), 10u);
+}
+
+// A plane of 2000 points 1 m in front of the sensor, 0.2 m square, and far outliers.
+Points plane_points(std::mt19937& rng) {
+  std::uniform_real_distribution<double> uniform(-0.1, 0.1);
+  Points p(2000, 3);
+  for (Eigen::Index i = 0; i < p.rows(); ++i) p.row(i) << uniform(rng), uniform(rng), 1.0;
+  return p;
+}
+
+Points with_rows(const Points& p, const Points& extra) {
+  Points out(p.rows() + extra.rows(), 3);
+  out << p, extra;
+  return out;
+}
+
+// The first rows of `noisy` are those of `clean`, points equal and normals within tolerance.
+void expect_same_normals(const PointCloud& clean, const PointCloud& noisy, double tolerance) {
+  ASSERT_GE(noisy.size(), clean.size());
+  for (Eigen::Index i = 0; i < Eigen::Index(clean.size()); ++i) {
+    ASSERT_EQ(noisy.points().row(i), clean.points().row(i)) << "row " << i;
+    ASSERT_LT((noisy.normals().row(i) - clean.normals().row(i)).norm(), tolerance) << "row " << i;
+  }
+}
+
+// One point at 1e12 m on every axis moved the float offset (then the centroid) to 2e9 m,
+// where float's step is 256 m: every point of the plane fell on one, and no normal was
+// left. Now the offset is the median (zero here) and the far point alone has no normal.
+TEST(Preprocessing, AFarOutlierChangesNoOtherNormal) {
+  std::mt19937 rng(11);
+  const Points p = plane_points(rng);
+  for (const NormalOrientation orientation :
+       {NormalOrientation::toward_viewpoint, NormalOrientation::outward}) {
+    for (const int k : {0, 20}) {
+      NormalEstimationParams params;
+      params.radius = 0.02;
+      params.k_neighbors = k;
+      params.orientation = orientation;
+      const PointCloud clean = estimate_normals(PointCloud(p), params);
+      ASSERT_EQ(clean.size(), 2000u);
+      const PointCloud noisy =
+          estimate_normals(PointCloud(with_rows(p, Points::Constant(1, 3, 1e12))), params);
+      EXPECT_EQ(noisy.size(), 2000u) << "k " << k;  // the outlier has no normal
+      expect_same_normals(clean, noisy, 1e-6);
+    }
+  }
+}
+
+// 1% of the points at random depths up to 100 m along the rays of random plane points,
+// none within 2 radii of the plane: the plane's normals are the same, bit for bit.
+TEST(Preprocessing, FarOutliersAlongTheRaysChangeNoOtherNormal) {
+  std::mt19937 rng(12);
+  const Points p = plane_points(rng);
+  std::uniform_real_distribution<double> depth(1.05, 100.0);
+  std::uniform_int_distribution<Eigen::Index> pick(0, p.rows() - 1);
+  Points outliers(20, 3);
+  for (Eigen::Index i = 0; i < outliers.rows(); ++i)
+    outliers.row(i) = p.row(pick(rng)) * depth(rng);
+  NormalEstimationParams params;
+  params.radius = 0.02;
+  const PointCloud clean = estimate_normals(PointCloud(p), params);
+  const PointCloud noisy = estimate_normals(PointCloud(with_rows(p, outliers)), params);
+  expect_same_normals(clean, noisy, 1e-12);
+}
+
+// Beyond float's reach (1e18 m from the median on an axis) a point is not searched; when
+// no point is left with a normal, the error counts them.
+TEST(Preprocessing, PointsBeyondFloatReachAreCountedInTheError) {
+  std::mt19937 rng(13);
+  const Points p = plane_points(rng);
+  NormalEstimationParams params;
+  params.radius = 0.02;
+  const PointCloud far(with_rows(p, Points::Constant(1, 3, 1e30)));
+  EXPECT_EQ(estimate_normals(far, params).size(), 2000u);
+  try {
+    estimate_normals(PointCloud(with_rows(p.topRows(3), Points::Constant(2, 3, 1e30))), params);
+    FAIL() << "no point has a normal";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("not searched: 2 of 5"), std::string::npos)
+        << error.what();
+  }
+}
+
+// A far point is one more voxel: the others' centroids are those without it, and a cloud
+// whose box held more voxels than an int (PCL's limit, refused before) is downsampled.
+TEST(Preprocessing, VoxelDownsampleOfAFarOutlierChangesNoOtherVoxel) {
+  std::mt19937 rng(14);
+  const Points p = plane_points(rng);
+  const PointCloud clean = voxel_downsample(PointCloud(p), 0.004);
+  for (const double far : {1e12, -1e12}) {
+    const PointCloud noisy =
+        voxel_downsample(PointCloud(with_rows(p, Points::Constant(1, 3, far))), 0.004);
+    ASSERT_EQ(noisy.size(), clean.size() + 1);
+    const Eigen::Index first = far < 0 ? 1 : 0;  // ordered by z index: -1e12 first
+    EXPECT_EQ(noisy.points().row(far < 0 ? 0 : Eigen::Index(clean.size())),
+              Eigen::RowVector3d::Constant(far));
+    EXPECT_EQ(noisy.points().middleRows(first, Eigen::Index(clean.size())), clean.points());
+  }
 }
 
 TEST(Preprocessing, NormalsOfAPlaneFaceTheViewpoint) {

@@ -419,7 +419,9 @@ CASES = [
         ValueError,
         "voxel_size must be finite",
     ),
-    Case("downsample/tiny", lambda f: svs.voxel_downsample(OBJECT, 1e-12), ValueError, "too small"),
+    Case(
+        "downsample/tiny", lambda f: svs.voxel_downsample(OBJECT, 1e-300), ValueError, "too small"
+    ),
     Case(
         "downsample/huge",
         lambda f: svs.voxel_downsample(OBJECT, 1e7),
@@ -779,10 +781,10 @@ CASES = [
         "voxel_size",
     ),
     Case(
-        "align/voxel too fine to downsample",
+        "align/voxel too fine",  # downsampled to 0.5 nm (every point its own voxel): the grid
         lambda f: svs.align(OBJECT, OBJECT, voxel_size=1e-9),
         ValueError,
-        "downsampling to half of voxel_size = 1e-09 m",
+        "voxels of 1e-09 m along an axis, over the limit .* voxels \\(max_voxels\\)",
     ),
     Case(
         "align/tiny voxel",

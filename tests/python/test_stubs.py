@@ -78,6 +78,8 @@ def has_constructor(cls: type) -> bool:
 
 
 def runtime_class_members(cls: type) -> set[str]:
+    if issubclass(cls, BaseException):  # InputWarning: a Python class, nothing of its own
+        return set()
     names = {name for name in vars(cls) if not name.startswith("_")}
     names |= {
         name

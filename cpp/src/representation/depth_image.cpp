@@ -3,6 +3,7 @@
 #include "common/checks.hpp"
 #include "representation/organized_detail.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <type_traits>
@@ -117,7 +118,78 @@ OrganizedCloud organized_of(const Eigen::Ref<const Image>& depth, const Eigen::M
   return out;
 }
 
+double scale_of(std::optional<double> depth_scale, double default_scale) {
+  const double scale = depth_scale.value_or(default_scale);
+  if (!(std::isfinite(scale) && scale > 0.0)) {
+    fail("depth_scale must be finite and > 0 sensor units per metre, got ", scale);
+  }
+  return scale;
+}
+
+template <typename Image>
+DepthScaleCheck scale_check(const Eigen::Ref<const Image>& depth, double scale) {
+  DepthScaleCheck check;
+  check.depth_scale = scale;
+  // Compared in the image's units (no division per pixel), in its own type for floats.
+  using Value = std::conditional_t<std::is_same_v<typename Image::Scalar, double>, double, float>;
+  const auto low = Value(kPlausibleMinDepth * scale), high = Value(kPlausibleMaxDepth * scale);
+  const auto infinity = std::numeric_limits<Value>::infinity();
+  for (Eigen::Index v = 0; v < depth.rows(); ++v) {
+    const auto* in = depth.data() + v * depth.outerStride();
+    std::size_t valid = 0, plausible = 0;
+    for (Eigen::Index u = 0; u < depth.cols(); ++u) {
+      const auto z = Value(in[u]);
+      valid += (z > Value(0)) & (z < infinity);
+      plausible += (z >= low) & (z <= high);
+    }
+    check.valid += valid;
+    check.plausible += plausible;
+  }
+  return check;
+}
+
+template <typename Image>
+double median_of(const Eigen::Ref<const Image>& depth, double scale) {
+  std::vector<double> values;
+  values.reserve(std::size_t(depth.size()));
+  for (Eigen::Index v = 0; v < depth.rows(); ++v) {
+    const auto* in = depth.data() + v * depth.outerStride();
+    for (Eigen::Index u = 0; u < depth.cols(); ++u) {
+      const double z = double(in[u]) / scale;
+      if (z > 0.0 && z < std::numeric_limits<double>::infinity()) values.push_back(z);
+    }
+  }
+  if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
+
 }  // namespace
+
+DepthScaleCheck check_depth_scale(const Eigen::Ref<const RawDepthImage>& depth,
+                                  std::optional<double> depth_scale) {
+  return scale_check<RawDepthImage>(depth, scale_of(depth_scale, kDefaultDepthScale));
+}
+DepthScaleCheck check_depth_scale(const Eigen::Ref<const DepthImageF>& depth,
+                                  std::optional<double> depth_scale) {
+  return scale_check<DepthImageF>(depth, scale_of(depth_scale, 1.0));
+}
+DepthScaleCheck check_depth_scale(const Eigen::Ref<const DepthImage>& depth,
+                                  std::optional<double> depth_scale) {
+  return scale_check<DepthImage>(depth, scale_of(depth_scale, 1.0));
+}
+
+double median_depth(const Eigen::Ref<const RawDepthImage>& depth,
+                    std::optional<double> depth_scale) {
+  return median_of<RawDepthImage>(depth, scale_of(depth_scale, kDefaultDepthScale));
+}
+double median_depth(const Eigen::Ref<const DepthImageF>& depth, std::optional<double> depth_scale) {
+  return median_of<DepthImageF>(depth, scale_of(depth_scale, 1.0));
+}
+double median_depth(const Eigen::Ref<const DepthImage>& depth, std::optional<double> depth_scale) {
+  return median_of<DepthImage>(depth, scale_of(depth_scale, 1.0));
+}
 
 PinholeIntrinsics intrinsics_from_matrix(const Eigen::Matrix3d& K, const std::string& argument) {
   if (!K.allFinite()) fail(argument, " must have finite entries");

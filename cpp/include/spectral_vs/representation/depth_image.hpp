@@ -85,6 +85,44 @@ PointCloud cloud_from_depth(const Eigen::Ref<const DepthImageF>& depth, const Ei
 PointCloud cloud_from_depth(const Eigen::Ref<const DepthImage>& depth, const Eigen::Matrix3d& K,
                             const DepthCloudParams& params = {});
 
+/// The depths a depth camera measures, metres: a scale that puts most of an image's
+/// pixels outside [kPlausibleMinDepth, kPlausibleMaxDepth] is likely wrong (a float image
+/// in millimetres read as metres puts a table at 800 m; a metres image divided by 1000, at
+/// 0.8 mm). Structured light, stereo and time-of-flight cameras range over 0.1-20 m.
+inline constexpr double kPlausibleMinDepth = 0.05;
+inline constexpr double kPlausibleMaxDepth = 50.0;
+
+/// How the depths of an image fall at a depth scale: whether the scale is plausible.
+struct DepthScaleCheck {
+  double depth_scale = 0.0;  ///< The scale used (the default of the image's type if unset).
+  std::size_t valid = 0;     ///< Pixels whose depth is finite and > 0 (min/max_depth ignored).
+  /// Of them, those within [kPlausibleMinDepth, kPlausibleMaxDepth] metres.
+  std::size_t plausible = 0;
+  /// True unless there are valid pixels and at most half of them are plausible.
+  bool ok() const { return 2 * plausible > valid || valid == 0; }
+};
+
+/// Counts the valid and the plausible depths of an image at `depth_scale` (unset: 1000 for
+/// raw images, 1 for floating ones), in one pass over the pixels (about 0.1 ms for 640 x
+/// 480): what the Python `cloud_from_depth` checks before it warns.
+/// @throws std::invalid_argument for a depth_scale that is not finite and > 0.
+DepthScaleCheck check_depth_scale(const Eigen::Ref<const RawDepthImage>& depth,
+                                  std::optional<double> depth_scale = std::nullopt);
+DepthScaleCheck check_depth_scale(const Eigen::Ref<const DepthImageF>& depth,
+                                  std::optional<double> depth_scale = std::nullopt);
+DepthScaleCheck check_depth_scale(const Eigen::Ref<const DepthImage>& depth,
+                                  std::optional<double> depth_scale = std::nullopt);
+
+/// The median of an image's valid depths (finite and > 0) at `depth_scale`, metres; NaN
+/// when there are none. A selection over a copy of the pixels (a few ms for 640 x 480).
+/// @throws std::invalid_argument for a depth_scale that is not finite and > 0.
+double median_depth(const Eigen::Ref<const RawDepthImage>& depth,
+                    std::optional<double> depth_scale = std::nullopt);
+double median_depth(const Eigen::Ref<const DepthImageF>& depth,
+                    std::optional<double> depth_scale = std::nullopt);
+double median_depth(const Eigen::Ref<const DepthImage>& depth,
+                    std::optional<double> depth_scale = std::nullopt);
+
 /// The organized cloud of a depth image: every pixel of the lattice, NaN where invalid
 /// (see `OrganizedCloud`); `valid_cloud()` of it equals `cloud_from_depth`.
 /// @throws std::invalid_argument as `cloud_from_depth`.

@@ -11,18 +11,21 @@ namespace spectral_vs {
 /// of a lattice through the origin; the output lists the occupied ones ordered by z, then
 /// y, then x index (deterministic). Normals, when present, are averaged and renormalised;
 /// a voxel whose normals cancel out is dropped.
-/// Double precision throughout, with sums relative to the cloud's box: precision does not
-/// depend on the distance from the origin. Linear in the number of points (a hash of the
-/// occupied voxels).
+/// Double precision throughout, with sums relative to each voxel's first point: precision
+/// depends neither on the distance from the origin nor on the cloud's extent (a far
+/// outlier is one more voxel and changes no other). Linear in the number of points (a hash
+/// of the occupied voxels, keyed by their three indices).
 /// @param voxel_size edge of the cube in metres, finite, > 0 and <= 1e6.
 /// @throws std::invalid_argument for an empty cloud or a voxel size that is not
-///         finite, not positive, over 1e6 m, or so small that voxel indices would overflow.
+///         finite, not positive, over 1e6 m, or so small that a point's voxel index would
+///         reach 2^62 (|coordinate| >= 2^62 voxel_size; the message counts those points).
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size);
 
 /// How `estimate_normals` resolves the sign ambiguity of a fitted plane.
 enum class NormalOrientation {
   toward_viewpoint,  ///< n . (viewpoint - p) >= 0: for scans, viewpoint = sensor origin.
-  outward,           ///< n . (p - centroid) >= 0: for closed, roughly star-shaped models.
+  outward,           ///< n . (p - c) >= 0, c the centroid of the points that get a normal: for
+                     ///< closed, roughly star-shaped models.
 };
 
 /// Settings of `estimate_normals`.
@@ -38,8 +41,13 @@ struct NormalEstimationParams {
 /// Points whose neighbourhood has fewer than 3 points, or no plane (all coincident), get
 /// no normal and are dropped. (A neighbourhood of collinear points gets an arbitrary
 /// normal perpendicular to its line.)
+/// PCL searches in float: the cloud goes in as it is when its per-axis median is within
+/// 100 m of the origin, else relative to that median, so that far outliers (one point at
+/// 1e12 m) change no other point's neighbours or normal; points 1e18 m or more from that
+/// reference on an axis are not searched and get no normal.
 /// @throws std::invalid_argument for an empty cloud, non-finite or non-positive
-///         radius, negative k, threads outside [1, 256], or when no point gets a normal.
+///         radius, negative k, threads outside [1, 256], or when no point gets a normal
+///         (the message counts the points too far to be searched).
 PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParams& params = {});
 
 }  // namespace spectral_vs
