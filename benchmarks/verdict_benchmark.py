@@ -344,8 +344,12 @@ def reduce_knots(knots: np.ndarray, xs, fitted, weights, max_knots: int = MAX_KN
 
 
 def fit_calibration(scores: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """Knots (score, probability) of P(right | score): monotone, from 0 to 1."""
+    """Knots (score, probability) of P(right | score): the isotonic fit, kept within
+    [1 / (N + 2), (N + 1) / (N + 2)] for N answers: a finite sample never warrants a
+    probability of exactly 0 or 1 (Laplace's rule at the ends)."""
     xs, fitted, weights = pav(scores, right.astype(float))
+    n = float(len(scores))
+    fitted = np.clip(fitted, 1.0 / (n + 2.0), (n + 1.0) / (n + 2.0))
     return reduce_knots(_block_knots(xs, fitted, weights), xs, fitted, weights)
 
 
@@ -404,14 +408,24 @@ def squared_mahalanobis(error: np.ndarray, covariance: np.ndarray) -> float:
     return float(error @ np.linalg.pinv(covariance, hermitian=True) @ error)
 
 
-def inflation_factor(records: list[dict]) -> float | None:
-    """k with mean NEES = e^T (k C)^-1 e = 6 over the right answers with a covariance."""
+#: Families left out of the covariance's fit: a voxel ten times too small pairs points
+#: only within a tenth of the sane distance, and its residuals, truncated there, say
+#: nothing of the error (such answers score low: none of them is reliable).
+NOT_FOR_COVARIANCE = ("wrong_voxel",)
+
+
+def inflation_factor(records: list[dict], kind: str) -> float | None:
+    """The library's k for ``kind`` with which the mean NEES e^T (k C)^-1 e is 6 over the
+    right answers (the families of NOT_FOR_COVARIANCE left out): the factor that makes
+    the result's covariance so, times the k it was computed with."""
     values = [
         squared_mahalanobis(np.array(r["error_vector"]), np.array(r["covariance"]))
         for r in records
-        if r["right"] and r.get("covariance") is not None
+        if r["right"] and r.get("covariance") is not None and r["family"] not in NOT_FOR_COVARIANCE
     ]
-    return float(np.mean(values) / TARGET_MEAN_NEES) if values else None
+    if not values:
+        return None
+    return float(current_inflation(kind) * np.mean(values) / TARGET_MEAN_NEES)
 
 
 # --- Metrics -------------------------------------------------------------------------------
@@ -470,14 +484,22 @@ def with_verdict(records: list[dict], calibration: dict, mode: str) -> list[dict
     return out
 
 
-def nees_values(records: list[dict], k: float | None) -> list[float]:
-    """NEES of the right answers with a covariance, the covariance scaled by ``k``."""
+def nees_values(records: list[dict], k: float | None, every_family: bool = False) -> list[float]:
+    """NEES of the right answers with a covariance, the covariance scaled by ``k``; the
+    families of NOT_FOR_COVARIANCE only with ``every_family``."""
     scale = 1.0 if k is None else k
     return [
         squared_mahalanobis(np.array(r["error_vector"]), scale * np.array(r["covariance"]))
         for r in records
-        if r["right"] and r.get("covariance") is not None
+        if r["right"]
+        and r.get("covariance") is not None
+        and (every_family or r["family"] not in NOT_FOR_COVARIANCE)
     ]
+
+
+def current_inflation(kind: str) -> float:
+    """The k the installed library computes its covariances with (1 before it had one)."""
+    return svs.covariance_inflation(kind) if hasattr(svs, "covariance_inflation") else 1.0
 
 
 def _share(part: np.ndarray, whole: np.ndarray) -> float | None:
@@ -495,7 +517,8 @@ def group_metrics(rows: list[dict], k: float | None) -> dict:
     is_right = np.array([r["right"] for r in rows], dtype=bool)
     no_truth = np.array([not r["has_truth"] for r in rows], dtype=bool)
     ambiguous = np.array([r.get("ambiguous", False) for r in rows], dtype=bool)
-    nees = nees_values(rows, k)
+    # A group of one family (the wrong voxels' own row) keeps it; "all" leaves those out.
+    nees = nees_values(rows, k, every_family=len({r["family"] for r in rows}) == 1)
     return {
         "cases": len(rows),
         "errors": len(rows) - len(scored),
@@ -565,7 +588,7 @@ def calibrate(records: list[dict]) -> dict:
             "calibration_shares": reliable_shares(conf, right, can, threshold),
             "calibration_shares_at_most_1pct_wrong": reliable_shares(conf, right, can, lowest),
             "right_share_eligible": _share(can, right),
-            "covariance_inflation": inflation_factor(rows),
+            "covariance_inflation": inflation_factor(rows, kind),
             "ece_on_calibration": expected_calibration_error(conf, right),
         }
     return out
@@ -597,7 +620,8 @@ def validate(records: list[dict], calibration: dict, mode: str) -> dict:
         if not of_kind or kind not in calibration:
             continue
         # The library's covariance as it comes; the fitted one times the fitted k.
-        k = 1.0 if mode == "library" else calibration[kind]["covariance_inflation"]
+        fitted = calibration[kind]["covariance_inflation"]
+        k = 1.0 if mode == "library" or fitted is None else fitted / current_inflation(kind)
         sources = sorted({r["verdict_source"] for r in of_kind} - {"error"})
         groups = {"all": of_kind} | {
             f: [r for r in of_kind if r["family"] == f]

@@ -416,6 +416,17 @@ confidence : float
       py::arg("viewpoint"), "verify_pose on clouds with normals; see spectral_vs.verify_pose.");
 
   m.def(
+      "covariance_inflation",
+      [](const std::string& kind) {
+        if (kind == "align") return covariance_inflation(RegistrationKind::model_to_scene);
+        if (kind == "views") return covariance_inflation(RegistrationKind::view_to_view);
+        throw std::invalid_argument("kind must be 'align' or 'views', got '" + kind + "'");
+      },
+      py::arg("kind"),
+      "The inflation k of the covariance of align() ('align') or align_views() ('views'), "
+      "fitted on the calibration set (docs/trust.md).");
+
+  m.def(
       "pose_covariance",
       [](const PointCloud& model, const PointCloud& scene, const py::handle& T, double voxel_size) {
         const Transform T_scene_model = to_transform(T, "T_scene_model");

@@ -285,10 +285,14 @@ def test_the_inflation_factor_makes_the_mean_nees_six():
     A = rng.normal(size=(6, 6))
     C = A @ A.T + 0.1 * np.eye(6)
     errors = rng.multivariate_normal(np.zeros(6), 4.0 * C, size=4000)
-    records = [
-        {"right": True, "covariance": C.tolist(), "error_vector": e.tolist()} for e in errors
-    ] + [{"right": False, "covariance": C.tolist(), "error_vector": [9.0] * 6}]
-    k = bench.inflation_factor(records)
+    right = {"right": True, "family": "full", "covariance": C.tolist()}
+    records = [right | {"error_vector": e.tolist()} for e in errors] + [
+        {"right": False, "family": "full", "covariance": C.tolist(), "error_vector": [9.0] * 6},
+        # Left out of the fit: a wrong-voxel answer, however far off.
+        right | {"family": "wrong_voxel", "error_vector": [9.0] * 6},
+    ]
+    # The library's k: the factor on the covariance as computed, times the k it used.
+    k = bench.inflation_factor(records, "align") / bench.current_inflation("align")
     assert k == pytest.approx(4.0, rel=0.06)
     assert np.mean(bench.nees_values(records, k)) == pytest.approx(6.0, rel=1e-9)
 

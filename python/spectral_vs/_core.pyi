@@ -761,10 +761,10 @@ class PoseVerification:
 CONFIDENCE_THRESHOLD: float
 RELIABLE_CONFIDENCE: float
 
+def covariance_inflation(kind: str) -> float: ...
 def pose_covariance(
     model: PointCloud, scene: PointCloud, T_scene_model: Any, voxel_size: float
 ) -> _Array: ...  # (6, 6)
-
 def _verify_pose(
     model: PointCloud,
     scene: PointCloud,

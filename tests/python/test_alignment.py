@@ -260,7 +260,7 @@ def test_a_room_frame_refines_only_its_best_hypothesis(data_dir, room_frame, see
     rotation_error, translation_error = errors(result, T_true[:3, :3], T_true[:3, 3])
     assert result.refinements_run == 1
     assert rotation_error < 0.5 and translation_error < 15.0  # degrees, mm
-    assert result.confidence > 0.8
+    assert result.score > 0.8
 
 
 def test_a_sparse_scan_keeps_to_the_coarse_icp_stage():

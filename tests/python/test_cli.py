@@ -351,7 +351,12 @@ def test_demo_on_the_milk_carton_scan(data_dir, capsys, tmp_path):
     rotation_error, translation_error = demo_errors(out)
     assert rotation_error <= 5.0  # degrees
     assert translation_error <= 10.0  # mm
-    assert code == 0, out
+    # The carton is cut from the scan: its back was never seen, and the pose turned half a
+    # turn about its upright axis fits the scan about as well. The verdict says so, names
+    # the other pose, and --check does not pass an answer a robot could not act on.
+    assert re.search(r"^ambiguous: confidence [\d.]+", out, re.M), out
+    assert re.search(r"1 other pose fit as well; the best 1[78]\d deg", out), out
+    assert code == 1, out
     for name in ("convergence.png", "alignment.png"):
         data = (tmp_path / name).read_bytes()
         assert data[:8] == PNG_MAGIC
@@ -423,9 +428,7 @@ def test_align_views_json_recovers_the_pose(view_pair, capsys):
     assert report["translation_error_mm"] == pytest.approx(translation_error, abs=0.2)
     # A right pose of two views that share 40-80% is well supported (docs/views.md).
     assert report["support_score"] > 0.1
-    assert report["support_score"] == pytest.approx(
-        report["fitness"] * report["overlap"], rel=1e-9
-    )
+    assert report["support_score"] == pytest.approx(report["fitness"] * report["overlap"], rel=1e-9)
     assert report["confidence"] >= svs.RELIABLE_CONFIDENCE
     assert report["hypotheses_checked"] == svs.ViewAlignParams().hypotheses
     assert 0 < report["voxel_size_m"] < report["search_voxel_size_m"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import sys
 import time
@@ -50,6 +51,14 @@ def verdict_line(result: Any) -> str:
     )
     if not result.reliable:
         line += f"; not reliable: {VERDICT_REASONS.get(result.status, result.status)}"
+    others = [a for a in result.alternatives if not a.symmetric]
+    if result.status == "ambiguous" and others:
+        best = max(others, key=lambda a: a.confidence)
+        line += (
+            f"\n  {len(others)} other pose{'s' if len(others) > 1 else ''} fit as well; the "
+            f"best {math.degrees(best.rotation_apart):.0f} deg and "
+            f"{1000 * best.translation_apart:.0f} mm away, confidence {best.confidence:.3f}"
+        )
     return line
 
 
