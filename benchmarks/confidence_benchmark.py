@@ -123,7 +123,7 @@ def record_of(case: case_lib.Case, run: str, result, seconds: float, wrong: bool
         "success": bool(success),
         "rotation_error_deg": rotation,
         "translation_error_m": translation,
-        "confidence": result.confidence,
+        "confidence": result.score,  # the uncalibrated score, the confidence of before the verdict
         "fitness": result.fitness,
         "inliers": result.inliers,
         "inlier_rmse_m": result.inlier_rmse,

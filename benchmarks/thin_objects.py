@@ -44,7 +44,7 @@ def run_case(spec: case_lib.CaseSpec) -> dict:
         "success": bool(rotation_deg < 5.0 and translation_m < 0.010),
         "rotation_error_deg": rotation_deg,
         "translation_error_mm": 1000.0 * translation_m,
-        "confidence": result.confidence,
+        "confidence": result.score,  # the uncalibrated score, the confidence of before the verdict
         "cpu_s": seconds,
     }
 

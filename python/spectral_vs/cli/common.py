@@ -55,7 +55,7 @@ def verdict_line(result: Any) -> str:
     if result.status == "ambiguous" and others:
         best = max(others, key=lambda a: a.confidence)
         line += (
-            f"\n  {len(others)} other pose{'s' if len(others) > 1 else ''} fit as well; the "
+            f"\n  {len(others)} other pose{'s fit' if len(others) > 1 else ' fits'} as well; the "
             f"best {math.degrees(best.rotation_apart):.0f} deg and "
             f"{1000 * best.translation_apart:.0f} mm away, confidence {best.confidence:.3f}"
         )
