@@ -52,6 +52,10 @@ def test_the_first_step_starts_from_the_global_registration(large_start):
     log, _ = run(large_start, ServoParams(), max_steps=1)
     first = log.records[0]
     assert first.relocalized and first.relocalization_score >= 0.05
+    # The global registration's verdict is recorded beside the score it was taken by.
+    # The global registration's verdict is recorded beside the score it was taken by:
+    # the right relocalization (below) is a reliable one.
+    assert first.relocalization_verdict == "reliable"
     # The step's estimate T_current_desired against the truth from the simulation: the
     # global registration, then one update of Algorithm 1 from it (whose EGI correlation
     # of two views this different peaks a few degrees off; the views agree near the goal).

@@ -130,6 +130,11 @@ class ServoRecord:
         The step started from a global registration (``ServoParams.relocalize``).
     relocalization_score : float
         Support score of the global registration tried this step (NaN when none was).
+    relocalization_verdict : str
+        The verdict (``ViewAlignResult.status``: ``"reliable"``, ``"doubtful"``, ...) of the
+        global registration tried this step (``""`` when none was). The servo takes a
+        relocalization by its support score (``relocalize_score``); the verdict is recorded
+        beside it (docs/trust.md).
     relocalization_prior : bool
         The global registration kept the servo's own estimate (its prior, refined) over
         every searched pose.
@@ -182,6 +187,7 @@ class ServoRecord:
     hidden_share: float = 0.0
     relocalized: bool = False
     relocalization_score: float = math.nan
+    relocalization_verdict: str = ""
     relocalization_prior: bool = False
     confidence: float = math.nan
     carried: bool = False

@@ -119,6 +119,7 @@ class Relocalization(ControllerState):
         result = _align_views(self._reference_view, cloud, self._view_params, prior)
         T, score = self._untried(result)
         record.relocalization_score = score
+        record.relocalization_verdict = result.status
         record.relocalization_prior = prior is not None and result.hypothesis == -1
         # While recovering the view widens step by step: a marginal score in the middle
         # of it is worth waiting out (a 17-degree wrong pose scored 0.061 there).
