@@ -355,7 +355,7 @@ def test_demo_on_the_milk_carton_scan(data_dir, capsys, tmp_path):
     # turn about its upright axis fits the scan about as well. The verdict says so, names
     # the other pose, and --check does not pass an answer a robot could not act on.
     assert re.search(r"^ambiguous: confidence [\d.]+", out, re.M), out
-    assert re.search(r"1 other pose fit as well; the best 1[78]\d deg", out), out
+    assert re.search(r"1 other pose fits as well; the best 1[78]\d deg", out), out
     assert code == 1, out
     for name in ("convergence.png", "alignment.png"):
         data = (tmp_path / name).read_bytes()
