@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import cases as case_lib
 import report as report_lib
-from report import markdown, pct
+from report import auc, markdown, pct
 
 import spectral_vs as svs
 
@@ -70,15 +70,6 @@ RUNS = ("default", "truncated", "other_object")
 TRUNCATED = {"hypotheses": 2, "refinements": 1}
 PEERS = ("o3d_ransac", "kiss_matcher")
 PEER_LABELS = {"o3d_ransac": "FPFH + RANSAC + ICP", "kiss_matcher": "KISS-Matcher + ICP"}
-
-
-def auc(scores: np.ndarray, labels: np.ndarray) -> float | None:
-    """ROC AUC as the Mann-Whitney statistic (ties count half)."""
-    pos, neg = scores[labels], scores[~labels]
-    if len(pos) == 0 or len(neg) == 0:
-        return None
-    greater = (pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum()
-    return float(greater / (len(pos) * len(neg)))
 
 
 def rates(scores: np.ndarray, labels: np.ndarray, threshold: float) -> tuple[float, float]:

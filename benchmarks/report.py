@@ -80,6 +80,18 @@ def add_cases_per_cell(parser: Any, defaults: dict[str, int], note: str = "") ->
 # --- Tables -------------------------------------------------------------------------------
 
 
+def auc(scores, labels) -> float | None:
+    """ROC AUC as the Mann-Whitney statistic (ties count half); None without both classes."""
+    import numpy as np
+
+    scores, labels = np.asarray(scores, dtype=float), np.asarray(labels, dtype=bool)
+    pos, neg = scores[labels], scores[~labels]
+    if len(pos) == 0 or len(neg) == 0:
+        return None
+    greater = (pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum()
+    return float(greater / (len(pos) * len(neg)))
+
+
 def pct(x: float | None) -> str:
     """A rate as a whole percentage, ``-`` for none."""
     return "-" if x is None else f"{100 * x:.0f}%"

@@ -63,7 +63,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import cases as case_lib
 import report as report_lib
 import verdict_sets as sets_lib
-from report import markdown, pct
+from report import auc, markdown, pct
 
 import spectral_vs as svs
 
@@ -429,15 +429,6 @@ def inflation_factor(records: list[dict], kind: str) -> float | None:
 
 
 # --- Metrics -------------------------------------------------------------------------------
-
-
-def auc(scores: np.ndarray, labels: np.ndarray) -> float | None:
-    """ROC AUC as the Mann-Whitney statistic (ties count half)."""
-    pos, neg = scores[labels], scores[~labels]
-    if len(pos) == 0 or len(neg) == 0:
-        return None
-    greater = (pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum()
-    return float(greater / (len(pos) * len(neg)))
 
 
 def _bins(conf: np.ndarray) -> np.ndarray:
