@@ -402,8 +402,8 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
                            : align_from_guess(model, scene, params, moving, prepared, deadline);
   result.voxel_size = params.scene.voxel_size;
   result.single_view = prepared.view.has_value();
-  // The last stage: the verdict.
-  if (params.verification.verify || params.search.global_search) {
+  // The last stage: the verdict (the verifier exists wherever a pose was verified).
+  if (prepared.verifier) {
     judge(result, model, *prepared.verifier, typical_size(model.points()),
           typical_size(scene.points()));
   } else {

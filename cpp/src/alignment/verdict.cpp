@@ -233,13 +233,20 @@ bool SelfFit::maps_onto_itself(const Transform& S) const {
   return verifier_.verify(model_, S).confidence >= kSymmetricSelfFit;
 }
 
-double gated_confidence(Verdict status, double confidence) {
-  return status == Verdict::bad_scale || status == Verdict::no_support ? 0.0 : confidence;
-}
-
 bool ended_normally(AlignStopReason reason) {
   return reason == AlignStopReason::converged || reason == AlignStopReason::kept_start ||
          reason == AlignStopReason::reselected;
+}
+
+Conclusion conclude(VerdictInputs inputs, const PoseCovariance& covariance,
+                    const Eigen::Vector3d& centre) {
+  Conclusion out;
+  out.determined = inputs.determined = pose_determined(covariance, centre);
+  out.status = verdict_of(inputs);
+  out.reliable = out.status == Verdict::reliable;
+  const bool gated = out.status == Verdict::bad_scale || out.status == Verdict::no_support;
+  out.confidence = gated ? 0.0 : inputs.confidence;
+  return out;
 }
 
 void judge(AlignResult& result, const PointCloud& model, const Verifier& verifier,
@@ -247,17 +254,14 @@ void judge(AlignResult& result, const PointCloud& model, const Verifier& verifie
   result.converged = ended_normally(result.stop_reason);
   result.score = result.confidence;
   result.confidence = calibrated_confidence(result.score, RegistrationKind::model_to_scene);
-  std::optional<SelfFit> self_fit;
-  if (!result.alternatives.empty()) self_fit.emplace(model, result.voxel_size);
-  const Transform T_model_scene = rigid_inverse(result.T_scene_model);
-  result.ambiguous = false;
   for (AlignAlternative& alternative : result.alternatives) {
     alternative.score = alternative.confidence;
     alternative.confidence =
         calibrated_confidence(alternative.score, RegistrationKind::model_to_scene);
-    alternative.symmetric = self_fit->maps_onto_itself(T_model_scene * alternative.T_scene_model);
-    result.ambiguous = result.ambiguous || !alternative.symmetric;
   }
+  result.ambiguous =
+      mark_symmetric(result.alternatives, model, result.voxel_size, result.T_scene_model,
+                     [](const AlignAlternative& a) { return a.T_scene_model; });
   const Eigen::Index points = model.points().rows();
   result.inlier_fraction = points ? double(result.inliers) / double(points) : 0.0;
   result.covariance =
@@ -269,12 +273,13 @@ void judge(AlignResult& result, const PointCloud& model, const Verifier& verifie
   inputs.supported = result.inliers > 0;
   inputs.timed_out = result.stop_reason == AlignStopReason::max_seconds;
   inputs.scale_ok = voxel_in_range(result.voxel_size, model_extent);
-  result.determined = inputs.determined = pose_determined(
-      result.covariance, result.T_scene_model.topLeftCorner<3, 3>() * model.centroid() +
-                             result.T_scene_model.topRightCorner<3, 1>());
-  result.status = verdict_of(inputs);
-  result.reliable = result.status == Verdict::reliable;
-  result.confidence = gated_confidence(result.status, result.confidence);
+  const Conclusion c = conclude(inputs, result.covariance,
+                                result.T_scene_model.topLeftCorner<3, 3>() * model.centroid() +
+                                    result.T_scene_model.topRightCorner<3, 1>());
+  result.determined = c.determined;
+  result.status = c.status;
+  result.reliable = c.reliable;
+  result.confidence = c.confidence;
 }
 
 void leave_unjudged(AlignResult& result) {
@@ -293,9 +298,13 @@ PoseCovariance pose_covariance(const PointCloud& model, const PointCloud& scene,
   require_normals(scene, "scene");
   detail::require_positive_finite(voxel_size, "voxel_size");
   require_rigid_transform(T_scene_model, "T_scene_model");
-  const detail::Verifier verifier(scene, voxel_size, std::nullopt);
-  return detail::covariance_at(model, verifier.fine_grid(), T_scene_model,
-                               kInlierVoxels * voxel_size, detail::typical_size(scene.points()),
+  // The pairs' grid alone (as the verification's, without its visibility grid).
+  const double pairs = kInlierVoxels * voxel_size;
+  Eigen::AlignedBox3d around = bounding_box(scene);
+  around.min().array() -= kVisibilityVoxels * voxel_size;
+  around.max().array() += kVisibilityVoxels * voxel_size;
+  return detail::covariance_at(model, detail::IcpScene(scene, around, pairs), T_scene_model, pairs,
+                               detail::typical_size(scene.points()),
                                covariance_inflation(RegistrationKind::model_to_scene));
 }
 

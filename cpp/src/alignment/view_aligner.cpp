@@ -602,7 +602,9 @@ class ViewVerdict {
                               v.inlier_distance, detail::typical_size(views_.current.points()),
                               covariance_inflation(RegistrationKind::view_to_view));
     if (!timed_out) add_alternatives(result, checked);
-    mark_symmetric(result);
+    result.ambiguous = detail::mark_symmetric(
+        result.alternatives, sample_, views_.scale.voxel_size, result.T_current_reference,
+        [](const ViewAlternative& a) { return a.T_current_reference; });
     VerdictInputs inputs;
     inputs.confidence = result.confidence;
     inputs.ambiguous = result.ambiguous;
@@ -610,12 +612,14 @@ class ViewVerdict {
     inputs.timed_out = timed_out;
     inputs.scale_ok =
         voxel_in_range(views_.scale.voxel_size, detail::typical_size(views_.reference.points()));
-    result.determined = inputs.determined = pose_determined(
-        result.covariance, result.T_current_reference.topLeftCorner<3, 3>() * centroid_ +
-                               result.T_current_reference.topRightCorner<3, 1>());
-    result.status = verdict_of(inputs);
-    result.reliable = result.status == Verdict::reliable;
-    result.confidence = detail::gated_confidence(result.status, result.confidence);
+    const detail::Conclusion c =
+        detail::conclude(inputs, result.covariance,
+                         result.T_current_reference.topLeftCorner<3, 3>() * centroid_ +
+                             result.T_current_reference.topRightCorner<3, 1>());
+    result.determined = c.determined;
+    result.status = c.status;
+    result.reliable = c.reliable;
+    result.confidence = c.confidence;
   }
 
  private:
@@ -677,20 +681,6 @@ class ViewVerdict {
         [](const ViewAlternative& a, const ViewAlternative& b) { return a.score > b.score; });
     if (result.alternatives.size() > kMaxViewAlternatives)
       result.alternatives.resize(kMaxViewAlternatives);
-  }
-
-  // The alternatives that are the same answer up to the reference's own symmetry, and
-  // whether any other is left (ambiguous).
-  void mark_symmetric(ViewAlignResult& result) const {
-    result.ambiguous = false;
-    if (result.alternatives.empty()) return;
-    const detail::SelfFit self_fit(sample_, views_.scale.voxel_size);
-    const Transform T_reference_current = detail::rigid_inverse(result.T_current_reference);
-    for (ViewAlternative& alternative : result.alternatives) {
-      alternative.symmetric =
-          self_fit.maps_onto_itself(T_reference_current * alternative.T_current_reference);
-      result.ambiguous = result.ambiguous || !alternative.symmetric;
-    }
   }
 
   const Views& views_;
