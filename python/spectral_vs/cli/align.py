@@ -407,9 +407,4 @@ def _print_result(
         f"{max(deviations['translation_std_mm']):.2g} mm"
         + (", single view" if result.single_view else "")
     )
-    if result.ambiguous:
-        print(
-            f"ambiguous: {_count(len(result.alternatives), 'other pose')} fit about as well "
-            "(--json lists them)"
-        )
     print_errors(args, errors, "the model centroid")

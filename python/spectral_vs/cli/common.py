@@ -51,8 +51,9 @@ def verdict_line(result: Any) -> str:
     )
     if not result.reliable:
         line += f"; not reliable: {VERDICT_REASONS.get(result.status, result.status)}"
+    # The other answers that make it ambiguous (not those of the object's own symmetry).
     others = [a for a in result.alternatives if not a.symmetric]
-    if result.status == "ambiguous" and others:
+    if result.ambiguous and others:
         best = max(others, key=lambda a: a.confidence)
         line += (
             f"\n  {len(others)} other pose{'s fit' if len(others) > 1 else ' fits'} as well; the "
