@@ -660,10 +660,13 @@ class RegistrationServo:
     # --- clouds ----------------------------------------------------------------------
 
     def _crop(self, cloud: PointCloud | np.ndarray, argument: str) -> tuple[np.ndarray, Any]:
+        if not isinstance(cloud, PointCloud):  # a raw buffer: its invalid returns dropped,
+            rows = np.asarray(cloud, dtype=float)  # as an Open3D user does
+            cloud = rows[np.isfinite(rows).all(axis=1)] if rows.ndim == 2 else rows
         c = as_cloud(cloud, argument)
         points = np.asarray(c.points, dtype=float)
         normals = None if c.normals is None else np.asarray(c.normals, dtype=float)
-        keep = points[:, 2] <= self.params.max_depth
+        keep = (points[:, 2] <= self.params.max_depth) & (points[:, 2] > 0)
         return points[keep], None if normals is None else normals[keep]
 
     def _prepare(self, points: np.ndarray, normals: np.ndarray | None) -> Any:

@@ -25,6 +25,11 @@ OCCLUSION_CELL = 0.05
 #: beyond the field of view of the simulated camera (58 by 75 degrees).
 _MAX_TANGENT = 2.0
 
+#: Least share of a bin's returns that must be occluders for the bin to count as covered.
+_LEAST_COVER = 0.25
+#: Current points (an evenly strided subsample) from which those shares are counted.
+_COVER_SAMPLE = 20000
+
 #: Points at or behind this depth (m) have no ray direction.
 _MIN_DEPTH = 1e-3
 
@@ -112,7 +117,9 @@ def near_occluders(
     hidden : float
         Share of the placed reference's points in front of the camera whose rays (binned
         by ``cell``) the occluders cover, in [0, 1]: the part of the reference the
-        occluders hide, by which the registration's fitness is expected to drop.
+        occluders hide, by which the registration's fitness is expected to drop. A bin is
+        covered by the share of the current points in it that are occluders, from a
+        quarter on, so that scattered stray returns hide nothing.
 
     Raises
     ------
@@ -137,9 +144,19 @@ def near_occluders(
     if not occluders.any():
         return occluders, 0.0
     row, column, inside, side = _bins(placed, cell)
-    o_row, o_column, o_inside, _ = _bins(current[occluders], cell)
-    covered = np.zeros((side, side), dtype=bool)
-    covered[o_row[o_inside], o_column[o_inside]] = True
+    # The shares per bin from an evenly strided subsample: a bin holds hundreds of returns.
+    stride = max(1, len(current) // _COVER_SAMPLE)
+    occluders_sampled = occluders[::stride]
+    c_row, c_column, c_inside, _ = _bins(current[::stride], cell)
+    # A bin is covered by the share of the current returns along its rays that are
+    # occluders, counted from a quarter on: an occluder fills its bins (its edge a part of
+    # them), while stray returns (a sensor's speckle at random depths) are a few points
+    # among the many of the surface behind.
+    cells = c_row * side + c_column
+    returns = np.bincount(cells[c_inside], minlength=side * side)
+    blocked = np.bincount(cells[c_inside & occluders_sampled], minlength=side * side)
+    covered = blocked / np.maximum(returns, 1)
+    covered = np.where(covered >= _LEAST_COVER, covered, 0.0).reshape(side, side)
     seen = inside & front
     hidden = float(covered[row[seen], column[seen]].mean()) if seen.any() else 0.0
     return occluders, hidden

@@ -597,6 +597,31 @@ def test_servo_sim_json_reports_every_start(capfd, tmp_path):
         assert run["final_mm"] > run["start_mm"] - 25
 
 
+def test_servo_sim_quiet_prints_one_line_per_start_and_the_total(capfd, tmp_path):
+    """--quiet: no set-up line and no steps, but one line per start (with its worst
+    excursion and held steps) and the total; --json gains the excursion, the held steps
+    and the scenario, whose box is in view from 1 s on."""
+    pytest.importorskip("pybullet")
+    from spectral_vs.cli import main
+
+    argv = ["servo-sim", "--starts", "2", "--max-steps", "3", "--no-figures"]
+    code = main([*argv, "--quiet", "--out", str(tmp_path)])
+    lines = [line for line in capfd.readouterr().out.splitlines() if line.strip()]
+    assert code == 1  # three steps do not converge
+    assert [line.split(":")[0] for line in lines[:2]] == ["start 0", "start 1"]
+    assert all("worst excursion" in line and "held step" in line for line in lines[:2])
+    assert lines[2].startswith("0/2 within 5 mm and 1 deg")
+    assert len(lines) == 3
+    code = main([*argv, "--json", "--scenario", "box_25cm_1s", "--max-steps", "12"])
+    summary = json.loads(capfd.readouterr().out)
+    assert summary["scenario"] == "box_25cm_1s"
+    for run in summary["starts"]:
+        assert run["held_steps"] >= 0 and run["worst_excursion_mm"] < 20.0
+        assert run["worst_excursion_deg"] < 5.0
+    assert main([*argv, "--scenario", "no_such_fault"]) == 2
+    assert "--scenario must be one of clean" in capfd.readouterr().err
+
+
 def test_start_poses_are_seeded_and_prefix_stable():
     """The first k of n starts are the k starts of a shorter request; seeds differ."""
     pytest.importorskip("pybullet")

@@ -51,21 +51,23 @@ def test_target_partly_out_of_view_holds_below_min_points(scene, desired):
     assert np.all(twist == 0)
 
 
-def test_a_cloud_with_nan_points_stops_the_robot_with_an_error(scene, desired):
-    """The servo takes finite points only: a cloud with a sensor's NaN holes raises
-    ValueError, and run_servo stops the robot before passing it on."""
+def test_a_cloud_with_nan_points_is_servoed_on_its_finite_points(scene, desired):
+    """A sensor's NaN holes (every 50th row of an (N, 6) capture, points and normals) are
+    dropped at each step, never raised on: the servo converges 20 mm back."""
     robot = FreeCamera(scene, camera_pose((0.02, 0.0, 0.0)))
     finite = robot.capture
 
     def with_holes():
-        points = np.array(finite().points)
-        points[::50] = np.nan
-        return points
+        cloud = finite()
+        rows = np.hstack([np.asarray(cloud.points), np.asarray(cloud.normals)])
+        rows[::50] = np.nan
+        return rows
 
     robot.capture = with_holes  # type: ignore[method-assign]
-    with pytest.raises(ValueError, match="not finite"):
-        run_servo(robot, FreeCameraKinematics(), SpectralServo(view(scene, desired)), dt=0.1)
-    assert robot.sent == [] and robot.stops == 1
+    log = run_servo(robot, FreeCameraKinematics(), SpectralServo(view(scene, desired)), dt=0.1)
+    assert log.converged, log.status
+    assert all(record.points < len(finite()) for record in log.records)
+    assert robot.stops == 1
 
 
 # --- Holds on sensor faults ------------------------------------------------------------
@@ -195,7 +197,9 @@ def test_an_occluder_is_dropped_and_ridden_or_held(scene, desired):
         with_occluder(view(scene, pose), hand), np.eye(4), now=0.1
     )
     assert record.occluded_points == len(hand) and record.hold == "" and twist.any()
-    assert 0.15 < record.hidden_share < 0.25  # measured 0.20
+    # It covers (0.5 / 1.2) of the table's tangents across, 0.21 of them; measured 0.15:
+    # its returns are 6 times sparser than the table's, so its edge bins count for less.
+    assert 0.12 < record.hidden_share < 0.25
     # The registration of the rest, next to the clean one (measured 1.8 mm, 0.8 degree).
     t_mm, r_deg = errors_mm_deg(record.T_current_desired, clean.T_current_desired)
     assert t_mm < 3.0 and r_deg < 1.5
@@ -253,13 +257,25 @@ def test_near_occluders_and_the_fingerprint():
     wall = plate(0.6, 0.3, 0.01)
     hand = plate(0.3, 0.05, 0.005)
     T = moved_by((0.0, 0.0, -0.01))
-    current = np.vstack([wall, hand])
+    # What a depth camera sees: the wall where the plate does not hide it, and the plate.
+    seen = np.abs(wall[:, :2] / wall[:, 2:]).max(axis=1) > 0.05 / 0.3
+    current = np.vstack([wall[seen], hand])
     occluders, hidden = near_occluders(current, wall, T, margin=0.05)
-    assert np.array_equal(occluders, np.r_[np.zeros(len(wall), bool), np.ones(len(hand), bool)])
+    assert np.array_equal(
+        occluders, np.r_[np.zeros(int(seen.sum()), bool), np.ones(len(hand), bool)]
+    )
     # The plate covers tangents within 0.05 / 0.3 of the axis, the wall within 0.3 / 0.61:
     # (0.167 / 0.49)^2 = 0.115 of the wall; measured 0.111 in 2.9-degree bins.
     assert 0.09 < hidden < 0.14
     assert not near_occluders(wall, wall, T, margin=0.05)[0].any()
+    # Stray returns: 1% of the wall's points at random depths nearer than it are
+    # occluders, but each is one among many returns along its rays: they hide nothing.
+    rng = np.random.default_rng(0)
+    speckle = wall.copy()
+    stray = rng.random(len(wall)) < 0.01
+    speckle[stray] *= rng.uniform(0.2, 0.8, (int(stray.sum()), 1))
+    occluders, hidden = near_occluders(speckle, wall, T, margin=0.05)
+    assert occluders.sum() == stray.sum() and hidden == 0.0
     with pytest.raises(ValueError, match="margin must be > 0 m"):
         near_occluders(current, wall, T, margin=0.0)
     assert frame_fingerprint(current) == frame_fingerprint(current.copy())

@@ -101,6 +101,15 @@ def _add_servo_arguments(servo: Any) -> None:
         "--max-steps", type=_positive_int, default=150, metavar="N", help="step budget per start"
     )
     servo.add_argument(
+        "--scenario",
+        default="clean",
+        metavar="NAME",
+        help="a fault the camera goes through on the way (spectral_vs.sim.scenarios: clean "
+        "(default), box_15cm_1s, box_15cm_3s, box_25cm_1s, box_25cm_3s, hand_20cm, hand_40cm, "
+        "tool_left, stray_points, latency_1, latency_2, dropped_frames, burst, stale_frames); "
+        "the latency ones add the depth noise",
+    )
+    servo.add_argument(
         "--stop-at-joint-limits",
         action="store_true",
         help="stop (reason joint_limit) as soon as the joint command has to clamp a joint at "
@@ -130,7 +139,11 @@ def _add_output_arguments(servo: Any) -> None:
         help="print a machine-readable summary: per start the final translation error (mm), "
         "rotation error (deg), steps, reason and success",
     )
-    servo.add_argument("--quiet", action="store_true", help="print only the summary")
+    servo.add_argument(
+        "--quiet",
+        action="store_true",
+        help="print only one line per start and the total (no steps, no set-up line)",
+    )
 
 
 def _servo_step_line(record: Any, T_world_reference: np.ndarray, servo_lib: Any) -> str:
@@ -158,8 +171,16 @@ def run_servo_sim(args: argparse.Namespace) -> int:
         from spectral_vs import sim
     except ImportError as error:
         raise InputError(f"servo-sim: {error}") from error
+    from spectral_vs.sim import scenarios
+
+    if args.scenario not in scenarios.SCENARIOS:
+        raise InputError(
+            f"--scenario must be one of {', '.join(scenarios.SCENARIOS)}, got {args.scenario!r}"
+        )
+    scenario = scenarios.SCENARIOS[args.scenario]
     plotting = None if args.no_figures else _plotting("--out")
-    noise = sim.DepthNoise.kinect(seed=args.seed) if args.noise else sim.DepthNoise()
+    noisy = args.noise or scenario.noise
+    noise = sim.DepthNoise.kinect(seed=args.seed) if noisy else sim.DepthNoise()
     sim_params = sim.SimParams(
         mode=args.sim_mode,
         robot=sim.robot_model(args.robot),
@@ -167,6 +188,7 @@ def run_servo_sim(args: argparse.Namespace) -> int:
     )
     params = servo_lib.ServoParams(mode=args.mode, warm_start=args.warm_start)
     talk = not (args.json or args.quiet)
+    lines = not args.json  # one line per start and the total, also with --quiet
     runs: list[dict[str, Any]] = []
     with sim.PyBulletRobot(sim_params) as robot:
         reference = robot.capture()
@@ -185,15 +207,15 @@ def run_servo_sim(args: argparse.Namespace) -> int:
             _print_setup(args, len(reference))
         for index, (q, t, r) in enumerate(starts):
             log, recorder = _servo_start(
-                args, robot, reference, T_world_reference, params, index, (q, t, r)
+                args, robot, reference, T_world_reference, params, index, (q, t, r), scenario
             )
             run = _run_summary(args, robot, log, T_world_reference, index, t, r)
             runs.append(run)
-            if talk:
+            if lines:
                 _print_run(run, log)
             if plotting is not None:
                 _plot_run(args, plotting, log, T_world_reference, reference, recorder, index)
-    return _report(args, runs, talk)
+    return _report(args, runs, lines)
 
 
 def _print_setup(args: argparse.Namespace, points: int) -> None:
@@ -203,7 +225,9 @@ def _print_setup(args: argparse.Namespace, points: int) -> None:
         f"{args.robot}: reference captured at home ({points} points); "
         f"{_count(args.starts, 'start')} of the {args.set} set (seed {args.seed}); "
         f"'{args.mode}' estimate{warm}, {args.sim_mode} simulation"
-        f"{', depth noise' if args.noise else ''}, control period {args.dt:g} s, "
+        f"{', depth noise' if _noisy_run(args) else ''}"
+        f"{', scenario ' + args.scenario if args.scenario != 'clean' else ''}, "
+        f"control period {args.dt:g} s, "
         f"{args.max_steps} steps max"
     )
 
@@ -216,6 +240,7 @@ def _servo_start(
     params: Any,
     index: int,
     start: tuple[np.ndarray, float, float],
+    scenario: Any,
 ) -> tuple[Any, Any]:
     """Servo back from start ``index`` (``q``, ``t`` m and ``r`` rad away from the
     reference pose), printing every step when there is one start: the log and the cloud
@@ -231,17 +256,21 @@ def _servo_start(
     def progress(record: servo_lib.ServoRecord) -> None:
         print(_servo_step_line(record, T_world_reference, servo_lib), flush=True)
 
-    return experiment.servo_from(
+    log, recorder = experiment.servo_from(
         robot,
         q,
         reference,
         params,
-        wrap=experiment.CloudRecorder,
+        wrap=lambda driven: experiment.CloudRecorder(scenario.wrap(driven)),
         dt=args.dt,
         max_steps=args.max_steps,
         stop_at_joint_limit=args.stop_at_joint_limits,
         callback=progress if per_step else None,
     )
+    remove = getattr(recorder.robot, "remove", None)
+    if callable(remove):
+        remove()  # a box the scenario put in the simulation
+    return log, recorder
 
 
 def _run_summary(
@@ -256,8 +285,11 @@ def _run_summary(
     """The JSON entry of one start: its distance, final error, steps, reason, success and
     step times."""
     from spectral_vs.poses import pose_error
+    from spectral_vs.sim.scenarios import excursion
 
-    final_t, final_r = pose_error(np.linalg.inv(robot.camera_pose()) @ T_world_reference)
+    final_pose = robot.camera_pose()
+    final_t, final_r = pose_error(np.linalg.inv(final_pose) @ T_world_reference)
+    worst_mm, worst_deg = excursion(log, T_world_reference, final_pose)
     return {
         "index": index,
         "start_mm": 1000 * t,
@@ -272,6 +304,9 @@ def _run_summary(
         "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
         "servo_step_cpu_ms": [round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")],
         "wall_s": log.wall_seconds,
+        "worst_excursion_mm": worst_mm,
+        "worst_excursion_deg": worst_deg,
+        "held_steps": int(sum(bool(r.hold) for r in log.records)),
         "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
         "relocalizations": int(sum(r.relocalized for r in log.records)),
     }
@@ -283,7 +318,9 @@ def _print_run(run: dict[str, Any], log: Any) -> None:
         f"start {run['index']}: {run['start_mm']:.0f} mm {run['start_deg']:.1f} deg -> "
         f"{log.reason} after {_count(run['steps'], 'step')}; final error "
         f"{run['final_mm']:.2f} mm, {run['final_deg']:.3f} deg "
-        f"({'ok' if run['success'] else 'TOO LARGE'}), {log.wall_seconds:.1f} s wall",
+        f"({'ok' if run['success'] else 'TOO LARGE'}); worst excursion "
+        f"{run['worst_excursion_mm']:.1f} mm, {run['worst_excursion_deg']:.1f} deg; "
+        f"{_count(run['held_steps'], 'held step')}; {log.wall_seconds:.1f} s wall",
         flush=True,
     )
 
@@ -314,6 +351,13 @@ def _plot_run(
         print(f"wrote {path}")
 
 
+def _noisy_run(args: argparse.Namespace) -> bool:
+    """Whether the run had the depth noise: ``--noise``, or a scenario that needs it."""
+    from spectral_vs.sim.scenarios import SCENARIOS
+
+    return bool(args.noise or SCENARIOS[args.scenario].noise)
+
+
 def _report(args: argparse.Namespace, runs: list[dict[str, Any]], talk: bool) -> int:
     """The summary (JSON or a line) and the exit code: 1 when a start ended too far."""
     successes = sum(run["success"] for run in runs)
@@ -325,7 +369,8 @@ def _report(args: argparse.Namespace, runs: list[dict[str, Any]], talk: bool) ->
             "mode": args.mode,
             "warm_start": args.warm_start,
             "sim_mode": args.sim_mode,
-            "noise": args.noise,
+            "noise": _noisy_run(args),
+            "scenario": args.scenario,
             "stop_at_joint_limits": args.stop_at_joint_limits,
             "success_mm": MAX_SERVO_ERROR_MM,
             "success_deg": MAX_SERVO_ERROR_DEG,

@@ -56,8 +56,11 @@ class SensorFaults(ControllerState):
         step holds). Runs once locked on; fills ``record.occluded_points`` and
         ``record.hidden_share``."""
         p = self.params
+        # From the first occluded frame on, once the servo has an estimate it vouches for:
+        # a relocalization taken, or the lock-on.
+        trusted = self._armed or self._anchored
         if not (
-            self._armed and self._previous is not None and math.isfinite(p.faults.occlusion_margin)
+            trusted and self._previous is not None and math.isfinite(p.faults.occlusion_margin)
         ):
             return cloud, False, 0.0, None
         points = len(cloud)
@@ -71,12 +74,7 @@ class SensorFaults(ControllerState):
         record.hidden_share = hidden
         if not record.occluded_points:
             return cloud, False, hidden, None
-        keep = ~mask
-        normals = cloud.normals
-        cloud = PointCloud(
-            np.asarray(cloud.points)[keep],
-            None if normals is None else np.asarray(normals)[keep],
-        )
+        cloud = cloud.select(~mask)
         # Near surfaces on none of the reference's rays (a far-off estimate sees the near
         # table as nearer than the reference) hide nothing to register: dropped, no hold.
         share = p.faults.occlusion_min_share
@@ -85,6 +83,14 @@ class SensorFaults(ControllerState):
             message = (
                 f"{len(cloud)} points remain without {record.occluded_points} "
                 f"occluding ones (min_points {p.faults.min_points})"
+            )
+            return cloud, occluded, hidden, message
+        if hidden > p.faults.occlusion_max_share:
+            # Most of the reference is behind the occluder: an outage, not a new scene to
+            # register (or relocalize) the little left in view onto.
+            message = (
+                f"an occluder hides {100 * hidden:.0f}% of the reference "
+                f"(occlusion_max_share {p.faults.occlusion_max_share:g})"
             )
             return cloud, occluded, hidden, message
         return cloud, occluded, hidden, None
@@ -154,11 +160,12 @@ class SensorFaults(ControllerState):
         record.twist = np.zeros(6)
         limit = self.params.faults.max_outage
         if limit == 0 or outage > limit + _CLOCK_TOLERANCE:
+            unreliable = hold == "unreliable"
             record.status = ServoStatus(
                 "stopped",
-                "sensor_outage",
-                f"no usable frame for {outage:.3f} s (max_outage {limit:g} s); "
-                f"last fault {hold}: {message}",
+                "unreliable" if unreliable else "sensor_outage",
+                f"no {'reliable estimate' if unreliable else 'usable frame'} for "
+                f"{outage:.3f} s (max_outage {limit:g} s); last hold {hold}: {message}",
             )
         else:
             record.status = ServoStatus("running", "", f"holding ({hold}): {message}")

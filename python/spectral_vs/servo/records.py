@@ -18,6 +18,7 @@ REASONS = (
     "empty_cloud",  # the camera sees nothing (peer servos; SpectralServo holds, HOLDS)
     "too_few_points",  # fewer than min_points (peer servos; SpectralServo holds, HOLDS)
     "sensor_outage",  # no usable frame (HOLDS) for longer than ServoParams.max_outage
+    "unreliable",  # no reliable estimate (HOLDS: "unreliable") for longer than max_outage
     "jump",  # the estimate moved more than ServoParams.jump_limit_* since the last step
     "joint_limit",  # the joint velocity command had to clamp a joint at its position limit
     "max_steps",  # the step budget of run_servo is spent
@@ -28,12 +29,14 @@ REASONS = (
 #: Why :class:`SpectralServo` held the robot still at a step (``ServoRecord.hold``; ``""``
 #: when it did not). A held step commands a zero twist, never converges and changes neither
 #: the watchdog's nor the warm start's previous estimate; holds that last longer than
-#: ``ServoParams.max_outage`` stop the servo with ``"sensor_outage"``.
+#: ``ServoParams.max_outage`` stop the servo with ``"sensor_outage"`` (``"unreliable"``
+#: when the last hold was ``"unreliable"``).
 HOLDS = (
     "empty_cloud",  # the capture has no point within max_depth (a dropped frame)
     "too_few_points",  # fewer than ServoParams.min_points points within max_depth
     "stale_frame",  # the frame of a previous step again (same fingerprint or capture stamp)
     "occluded",  # an occluder hides too much, or the registration without it is poor
+    "unreliable",  # no estimate the verdict vouches for (docs/servoing.md, "cannot see")
 )
 
 
@@ -87,6 +90,18 @@ class ServoRecord:
         Iterations of Algorithm 1 this step.
     fitness : float
         Share of the reference's voxels matched in the current cloud at the estimate.
+    visible_fitness : float
+        ``fitness`` over the part of the reference that no occluder hides,
+        ``fitness / (1 - hidden_share)`` at most 1: what the stop rule, the lock-on, the
+        loss and the arrival check read (an occluder lowers ``fitness`` by what it hides).
+    reliable : bool
+        The twist of the step comes from an estimate the servo vouches for: a global
+        registration whose verdict is ``reliable`` (``ViewAlignResult.reliable``), carried
+        along the camera's measured motion, or a registration warm-started from it that
+        fits the reference's visible part (``visible_fitness``) and stays within the
+        watchdog's limits of it. A step that is not reliable never moves the robot (it
+        holds, ``"unreliable"``), except a recovery step (``recovery``) and the paper's
+        bare loop (``ServoParams.relocalize`` off), which no verdict checks.
     twist : ndarray, shape (6,)
         Commanded camera twist (v in m/s, omega in rad/s), camera frame, after saturation.
     saturation : float
@@ -133,8 +148,8 @@ class ServoRecord:
     relocalization_verdict : str
         The verdict (``ViewAlignResult.status``: ``"reliable"``, ``"doubtful"``, ...) of the
         global registration tried this step (``""`` when none was). The servo takes a
-        relocalization by its support score (``relocalize_score``); the verdict is recorded
-        beside it (docs/trust.md).
+        relocalization only when it is ``"reliable"`` (docs/trust.md), its support score
+        reaches ``relocalize_score`` and it is not near a refuted estimate.
     relocalization_prior : bool
         The global registration kept the servo's own estimate (its prior, refined) over
         every searched pose.
@@ -194,6 +209,8 @@ class ServoRecord:
     recovery: str = ""
     refuted: bool = False
     cpu_seconds: float = 0.0
+    visible_fitness: float = math.nan
+    reliable: bool = False
 
 
 @dataclass

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from spectral_vs._core import PointCloud, ViewAlignResult
+from spectral_vs._core import PointCloud
 from spectral_vs._core import align_views as _align_views
 from spectral_vs.poses import pose_error
 from spectral_vs.servo.law import _rigid_inverse
@@ -23,6 +23,8 @@ from spectral_vs.servo.state import ControllerState
 #: of a point in front of the camera, m (field_share).
 _FIELD_POINTS = 4000
 _FIELD_NEAR = 1e-3
+#: The recovery widens its standoff up to this many times recover_standoff.
+_MAX_STANDOFFS = 3
 #: The confidence of an estimate is its fitness over the share of the reference in the
 #: field, but at least over this share (the extreme starts keep 30% in the field).
 _MIN_FIELD_SHARE = 0.3
@@ -116,8 +118,10 @@ class Relocalization(ControllerState):
         self._since_relocalization = 0
         self._confirmed = False
         self._unconfirmed += 1  # until the step confirms it
+        if not cloud.has_normals:  # an (N, 3) capture: the downsampled cloud's normals
+            cloud = self._prepare(cloud, "current")
         result = _align_views(self._reference_view, cloud, self._view_params, prior)
-        T, score = self._untried(result)
+        T, score = np.asarray(result.T_current_reference), float(result.support.score)
         record.relocalization_score = score
         record.relocalization_verdict = result.status
         record.relocalization_prior = prior is not None and result.hypothesis == -1
@@ -128,7 +132,9 @@ class Relocalization(ControllerState):
             if self._recovering()
             else self.params.relocalization.relocalize_score
         )
-        if score < least:
+        # Only the answer the verdict vouches for: never an alternative it did not judge,
+        # nor a pose the arrival check refuted.
+        if not result.reliable or score < least or self._near_refuted(T):
             self._failed_relocalizations += 1
             return
         self._reset_recovery()
@@ -136,22 +142,8 @@ class Relocalization(ControllerState):
         self._previous = T
         self._motion = np.eye(4)
         self._anchored = True
+        self._ever_anchored = True
         self._lost = False
-
-    def _untried(self, result: ViewAlignResult) -> tuple[np.ndarray, float]:
-        """The best-supported pose of ``result`` (``T_current_reference``) that is not near
-        an estimate the arrival check refuted, and its support score (0 when every pose is:
-        none is taken)."""
-        T = np.asarray(result.T_current_reference)
-        if not self._refuted:
-            return T, float(result.support.score)
-        # The checked hypotheses come best score first (ViewAlignResult.hypotheses).
-        searched = ((np.asarray(pose), float(support.score)) for pose, support in result.hypotheses)
-        candidates = [(T, float(result.support.score)), *searched]
-        for pose, score in candidates:
-            if not self._near_refuted(pose):
-                return pose, score
-        return T, 0.0
 
     def _near_refuted(self, T_current_desired: np.ndarray) -> bool:
         """Whether ``T_current_desired`` puts the goal within the watchdog's jump limits of
@@ -175,7 +167,7 @@ class Relocalization(ControllerState):
             record.translation_error <= p.relocalization.refute_translation
             and record.rotation_error <= p.relocalization.refute_rotation
         )
-        poor = at_goal and record.fitness < p.relocalization.refute_fitness
+        poor = at_goal and record.visible_fitness < p.relocalization.refute_fitness
         self._poor_arrivals = self._poor_arrivals + 1 if poor else 0
         if self._poor_arrivals < p.relocalization.refute_steps:
             return
@@ -198,12 +190,16 @@ class Relocalization(ControllerState):
 
     def _recovering(self) -> bool:
         """Whether this step recovers (``ServoParams.recover_after``): no global registration
-        was taken yet and the last ``recover_after`` ones stayed under the score."""
+        was taken yet in this run and the last ``recover_after`` ones were not taken."""
         p = self.params
+        # Only before the run's first estimate: once the servo has had one, the view
+        # shared enough with the reference, and a lost estimate is held, not recovered
+        # from by moving (docs/servoing.md, "What the servo does when it cannot see").
         return (
             p.relocalization.relocalize
             and p.recovery.recover_after > 0
             and not self._anchored
+            and not self._ever_anchored
             and self._failed_relocalizations >= p.recovery.recover_after
         )
 
@@ -239,7 +235,7 @@ class Relocalization(ControllerState):
             if self._T_motion_backoff is None:
                 self._T_motion_backoff = motion.copy()
             T = np.eye(4)
-            T[2, 3] = -p.recovery.recover_standoff
+            T[2, 3] = -self._standoff()
             T = _rigid_inverse(motion) @ self._T_motion_backoff @ T
             record.recovery = "back_off"
         record.T_current_desired = T
@@ -272,5 +268,16 @@ class Relocalization(ControllerState):
         T = np.eye(4)
         T[:3, :3] = _turn_between(n_reference, n_current)
         # The target origin t lies at n.t + d_current from the plane.
-        T[:3, 3] = n_current * (d_reference + p.recovery.recover_standoff - d_current)
+        T[:3, 3] = n_current * (d_reference + self._standoff() - d_current)
         return T
+
+    def _standoff(self) -> float:
+        """How much farther from the scene than the reference the recovery takes the camera,
+        m: ``recover_standoff``, once more for every ``recover_widen`` global registrations
+        of the recovery that were not reliable, up to :data:`_MAX_STANDOFFS` times it (a
+        farther view sees more of the scene)."""
+        p = self.params.recovery
+        if p.recover_widen == 0:
+            return p.recover_standoff
+        tried = max(0, self._failed_relocalizations - p.recover_after)
+        return p.recover_standoff * min(1 + tried // p.recover_widen, _MAX_STANDOFFS)

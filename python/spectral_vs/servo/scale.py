@@ -86,14 +86,25 @@ class ServoScale:
     derived: tuple[str, ...]
 
 
+#: Farthest a kept point may lie across the optical axis, in units of ``max_depth``: 2 is
+#: 63 degrees off the axis at ``max_depth``, beyond any depth camera's field.
+LATERAL_BEYOND_DEPTH = 2.0
+
+
 def crop_to_depth(cloud: PointCloud, max_depth: float) -> PointCloud:
-    """The points of ``cloud`` within ``max_depth`` of the camera along its optical axis."""
+    """The points of ``cloud`` in front of the camera and within ``max_depth`` of it along
+    its optical axis (and :data:`LATERAL_BEYOND_DEPTH` times that across it): a stray return
+    kilometres off or behind the camera is no surface to register, and would size the
+    grids by itself."""
     if not math.isfinite(max_depth) or len(cloud) == 0:
         return cloud
-    depth = np.asarray(cloud.points)[:, 2]
-    if depth.max() <= max_depth:  # the usual case, without a mask
-        return cloud
-    return cloud.select(depth <= max_depth)  # copied in the core
+    points = np.asarray(cloud.points)
+    depth = points[:, 2]
+    lateral = LATERAL_BEYOND_DEPTH * max_depth
+    if depth.max() <= max_depth and depth.min() > 0 and np.abs(points[:, :2]).max() <= lateral:
+        return cloud  # the usual case, without a mask
+    keep = (depth <= max_depth) & (depth > 0) & (np.abs(points[:, :2]).max(axis=1) <= lateral)
+    return cloud.select(keep)  # copied in the core
 
 
 def derived_lengths(reference: PointCloud) -> dict[str, float]:

@@ -36,6 +36,8 @@ class ControllerState:
     _steps: int
     _last_turn: float  #: the plane turn of the last estimate, rad
     _anchored: bool  #: a global registration was taken: registrations warm-start
+    _ever_anchored: bool  #: one was taken in this run (no recovery after it)
+    _last_now: float | None  #: the last step's time, s (now never goes backwards)
     _lost: bool  #: no trusted estimate: the next step relocalizes
     _since_relocalization: int | None  #: steps since the last attempt
     _confirmed: bool  #: the last relocalization was taken and confirmed

@@ -10,8 +10,14 @@ it, except :meth:`capture`, which it spoils as a real wrist camera does:
 - :class:`RepeatedFrames`: the previous frame delivered again at chosen capture indices
   (a stale frame from a driver that missed an update);
 - :class:`HandOccluder`: a hand-sized box held in front of the camera, along its optical
-  axis, during a window of the robot clock (needs a
-  :class:`~spectral_vs.sim.robot.PyBulletRobot`: the box is a body of its simulation).
+  axis, during a window of the robot clock, still or sweeping across the view (a hand), or
+  left where it first appeared (a tool left in view) (needs a
+  :class:`~spectral_vs.sim.robot.PyBulletRobot`: the box is a body of its simulation);
+- :class:`StrayPoints`: stray returns added to every capture: a few far-off points,
+  a share of the pixels at random depths, non-finite rows (the capture then comes as an
+  (N, 6) array, as a driver's raw buffer);
+- :class:`Latency`: every capture delivered one or more control periods late (a USB
+  camera's pipeline).
 
 Capture indices count the wrapper's calls of :meth:`capture` from 0; windows are on the
 robot clock (:meth:`RobotInterface.time`) since the wrapper was made, s, which is the
@@ -183,15 +189,18 @@ class RepeatedFrames(FaultyCamera):
 
 
 class HandOccluder(FaultyCamera):
-    """A hand-sized box in front of the camera while the robot clock is in
-    ``[start, start + duration)`` since the wrapper was made.
+    """A box in front of the camera while the robot clock is in ``[start, start +
+    duration)`` since the wrapper was made.
 
     The box is a visual-only body of the robot's PyBullet client (it collides with
-    nothing), created at the first capture in the window, placed before every capture
-    with its centre ``distance`` along the camera's optical axis (plus ``offset`` across
-    it) and its faces parallel to the image plane, and removed at the first capture after
-    the window (or by :meth:`remove`). A 9 cm box at 0.25 m hides about a tenth of a 58
-    degree view: part of the scene, not all of it.
+    nothing), created at the first capture in the window with its centre ``distance``
+    along the camera's optical axis (plus ``offset`` across it) and its faces parallel to
+    the image plane, and removed at the first capture after the window (or by
+    :meth:`remove`). It follows the camera (a hand held in front of it), moving across the
+    view at ``sweep`` m/s along the camera's x axis (a hand passing by: centred at the
+    window's middle), or stays where it appeared with ``follow=False`` (a tool left in
+    view). A 9 cm box at 0.25 m hides about a tenth of a 58 degree view: part of the
+    scene, not all of it.
 
     Parameters
     ----------
@@ -200,13 +209,19 @@ class HandOccluder(FaultyCamera):
     start : float
         When the box appears, s of robot clock since the wrapper was made.
     duration : float
-        How long it stays, s.
+        How long it stays, s (``math.inf``: for good).
     distance : float
         Distance of the box's centre from the camera along the optical axis, m.
-    size : float
-        Edge of the cubic box, m (a hand: about 0.08-0.10).
+    size : float or (float, float, float)
+        Edge of the cubic box, or its edges along the camera's x, y and z, m (a hand:
+        about 0.08-0.10, or 0.1 x 0.2 x 0.05).
     offset : (float, float)
         Offset of the box's centre across the optical axis (camera x right, y down), m.
+    sweep : float
+        Speed of the box across the view along the camera's x axis, m/s (needs a finite
+        ``duration``); 0: still.
+    follow : bool
+        The box follows the camera (True) or stays where it first appeared (False).
     """
 
     def __init__(
@@ -216,19 +231,26 @@ class HandOccluder(FaultyCamera):
         duration: float = 1.0,
         *,
         distance: float = 0.25,
-        size: float = 0.09,
+        size: float | tuple[float, float, float] = 0.09,
         offset: tuple[float, float] = (0.0, 0.0),
+        sweep: float = 0.0,
+        follow: bool = True,
     ) -> None:
         super().__init__(robot)
         if not hasattr(robot, "client") or not hasattr(robot, "camera_pose"):
             raise ValueError("robot must be a PyBulletRobot (with client and camera_pose)")
         self.start, self.duration = _window(start, duration)
-        if not (math.isfinite(distance) and distance > size / 2):
-            raise ValueError(f"distance must be finite and > size / 2 m, got {distance}")
-        if not (math.isfinite(size) and size > 0):
+        edges = np.broadcast_to(np.asarray(size, dtype=float), (3,)).copy()
+        if not (np.isfinite(edges).all() and (edges > 0).all()):
             raise ValueError(f"size must be finite and > 0 m, got {size}")
-        self.distance, self.size = float(distance), float(size)
+        if not (math.isfinite(distance) and distance > edges[2] / 2):
+            raise ValueError(f"distance must be finite and > size / 2 m, got {distance}")
+        if not math.isfinite(sweep) or (sweep != 0 and not math.isfinite(duration)):
+            raise ValueError(f"sweep must be finite m/s, with a finite duration; got {sweep}")
+        self.distance, self.edges = float(distance), edges
+        self.size = float(edges.max())
         self.offset = (float(offset[0]), float(offset[1]))
+        self.sweep, self.follow = float(sweep), bool(follow)
         self._sim: Any = robot  # a PyBulletRobot: its client and ground-truth camera pose
         #: PyBullet body id of the box while it is present, else None.
         self.body: int | None = None
@@ -236,22 +258,26 @@ class HandOccluder(FaultyCamera):
     def _spoil(self, index: int) -> PointCloud | None:
         elapsed = self.elapsed() + 1e-9  # the clock adds up periods of dt
         if self.start <= elapsed < self.start + self.duration:
-            self._place()
+            if self.body is None or self.follow:
+                self._place(elapsed)
             self.faults.append(index)
         else:
             self.remove()
         return None  # the camera renders the scene with the box in it
 
-    def _place(self) -> None:
+    def _place(self, elapsed: float) -> None:
         """Create the box if needed and put it in front of the camera."""
         client = self._sim.client
         if self.body is None:
             shape = client.createVisualShape(
-                client.GEOM_BOX, halfExtents=[self.size / 2] * 3, rgbaColor=[0.9, 0.7, 0.6, 1]
+                client.GEOM_BOX, halfExtents=(self.edges / 2).tolist(), rgbaColor=[0.9, 0.7, 0.6, 1]
             )
             self.body = int(client.createMultiBody(baseMass=0.0, baseVisualShapeIndex=shape))
         T = np.asarray(self._sim.camera_pose(), dtype=float)
-        centre = T[:3, :3] @ np.array([*self.offset, self.distance]) + T[:3, 3]
+        x = self.offset[0]
+        if self.sweep:
+            x += self.sweep * (elapsed - self.start - self.duration / 2)
+        centre = T[:3, :3] @ np.array([x, self.offset[1], self.distance]) + T[:3, 3]
         client.resetBasePositionAndOrientation(self.body, centre.tolist(), _quaternion(T[:3, :3]))
 
     def remove(self) -> None:
@@ -259,6 +285,111 @@ class HandOccluder(FaultyCamera):
         if self.body is not None:
             self._sim.client.removeBody(self.body)
             self.body = None
+
+
+class StrayPoints(FaultyCamera):
+    """Stray returns in every capture, as a depth sensor gives them.
+
+    Each capture gets ``far`` points at ``far_distance`` along random rays in front of the
+    camera, moves ``random_share`` of its points to random depths in ``depth_range`` along
+    their own rays (their normals turned to the camera), and, with ``non_finite`` rows,
+    comes as an (N, 6) array (points, normals) with that many rows of NaN and inf, as a
+    driver's raw buffer. Seeded: the same captures give the same stray points.
+
+    Parameters
+    ----------
+    robot : RobotInterface
+        The robot whose camera returns stray points.
+    far : int
+        Far-off points per capture, >= 0.
+    far_distance : float
+        Their distance from the camera, m.
+    random_share : float
+        Share of the points moved to random depths, in [0, 1].
+    depth_range : (float, float)
+        The random depths, m.
+    non_finite : int
+        Non-finite rows per capture, >= 0.
+    seed : int
+        Seed of the draws.
+    """
+
+    def __init__(
+        self,
+        robot: RobotInterface,
+        *,
+        far: int = 1,
+        far_distance: float = 1e4,
+        random_share: float = 0.0,
+        depth_range: tuple[float, float] = (0.1, 5.0),
+        non_finite: int = 0,
+        seed: int = 0,
+    ) -> None:
+        super().__init__(robot)
+        if far < 0 or non_finite < 0:
+            raise ValueError(f"far and non_finite must be >= 0, got {far}, {non_finite}")
+        if not 0.0 <= random_share <= 1.0:
+            raise ValueError(f"random_share must be in [0, 1], got {random_share}")
+        if not 0 < depth_range[0] < depth_range[1]:
+            raise ValueError(
+                f"depth_range must be (low, high) with 0 < low < high m, got {depth_range}"
+            )
+        self.far, self.far_distance = int(far), float(far_distance)
+        self.random_share, self.depth_range = float(random_share), depth_range
+        self.non_finite = int(non_finite)
+        self._rng = np.random.default_rng(seed)
+
+    def capture(self) -> Any:  # an (N, 6) array when it has non-finite rows
+        index = self._captures
+        self._captures += 1
+        cloud = self.robot.capture()
+        points = np.array(cloud.points, dtype=float)
+        normals = np.array(cloud.normals, dtype=float)
+        rng = self._rng
+        moved = rng.random(len(points)) < self.random_share
+        if moved.any():
+            depth = rng.uniform(*self.depth_range, int(moved.sum()))
+            rays = points[moved] / np.linalg.norm(points[moved], axis=1, keepdims=True)
+            points[moved] = rays * depth[:, None]
+            normals[moved] = -rays
+        rays = rng.normal(size=(self.far, 3))
+        rays[:, 2] = np.abs(rays[:, 2]) + 1.0  # in front of the camera
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        points = np.vstack([points, self.far_distance * rays])
+        normals = np.vstack([normals, -rays])
+        if self.far or moved.any() or self.non_finite:
+            self.faults.append(index)
+        if not self.non_finite:
+            return PointCloud(points, normals)
+        bad = np.full((self.non_finite, 6), np.nan)
+        bad[::2, 2] = np.inf
+        return np.vstack([np.hstack([points, normals]), bad])
+
+
+class Latency(FaultyCamera):
+    """Every capture delivered ``periods`` captures late: the frame the camera took that
+    many control periods ago (the first frames until the pipeline has filled).
+
+    Parameters
+    ----------
+    robot : RobotInterface
+        The robot whose camera lags.
+    periods : int
+        How many captures late, >= 1.
+    """
+
+    def __init__(self, robot: RobotInterface, periods: int = 1) -> None:
+        super().__init__(robot)
+        if periods < 1:
+            raise ValueError(f"periods must be >= 1, got {periods}")
+        self.periods = int(periods)
+        self._frames: list[PointCloud] = []
+
+    def _deliver(self, cloud: PointCloud) -> PointCloud:
+        self._frames.append(cloud)
+        if len(self._frames) > self.periods + 1:
+            self._frames.pop(0)
+        return self._frames[0]
 
 
 def _quaternion(R: np.ndarray) -> list[float]:
@@ -278,4 +409,12 @@ def _quaternion(R: np.ndarray) -> list[float]:
     return q
 
 
-__all__ = ["DroppedFrames", "FaultyCamera", "HandOccluder", "Outage", "RepeatedFrames"]
+__all__ = [
+    "DroppedFrames",
+    "FaultyCamera",
+    "HandOccluder",
+    "Latency",
+    "Outage",
+    "RepeatedFrames",
+    "StrayPoints",
+]
