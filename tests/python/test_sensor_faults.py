@@ -15,6 +15,7 @@ from conftest import iiwa_small_start
 from spectral_vs.servo import ServoLog, ServoParams, SpectralServo, pose_error, run_servo
 
 faults = pytest.importorskip("spectral_vs.sim.faults")
+scenarios = pytest.importorskip("spectral_vs.sim.scenarios")
 
 
 def servo_with(make_faulty, max_steps: int = 60, params: ServoParams | None = None):
@@ -35,6 +36,10 @@ def servo_with(make_faulty, max_steps: int = 60, params: ServoParams | None = No
         t, r = pose_error(np.linalg.inv(robot.camera_pose()) @ T_reference)
         states = robot.client.getJointStates(robot.robot_id, list(range(7)))
         velocities = np.array([state[1] for state in states])
+        # No excursion: at no step farther from the reference than at the start, plus
+        # 20 mm and 5 degrees.
+        worst_mm, worst_deg = scenarios.excursion(log, T_reference, robot.camera_pose())
+        assert worst_mm <= scenarios.EXCURSION_MM and worst_deg <= scenarios.EXCURSION_DEG
     return log, faulty, (1000 * t, math.degrees(r)), velocities
 
 
