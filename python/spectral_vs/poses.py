@@ -67,6 +67,11 @@ def _pose(T: npt.ArrayLike, argument: str) -> np.ndarray:
     T = np.asarray(T, dtype=float)
     if T.shape != (4, 4):
         raise ValueError(f"{argument} must be a 4x4 transform, got shape {T.shape}")
+    if not np.isfinite(T).all():
+        raise ValueError(f"{argument} must be finite, got {T.tolist()}")
+    # Products of inverses leave rounding in the last row: 1e-9 tolerates that alone.
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-9):
+        raise ValueError(f"{argument} must have the bottom row [0, 0, 0, 1], got {T[3].tolist()}")
     return T
 
 
@@ -102,8 +107,8 @@ def pose_error(
     """
     T = _pose(T, "T")
     point = np.zeros(3) if center is None else np.asarray(center, dtype=float)
-    if point.shape != (3,):
-        raise ValueError(f"center must be 3 numbers (metres), got shape {point.shape}")
+    if point.shape != (3,) or not np.isfinite(point).all():
+        raise ValueError(f"center must be 3 finite numbers (metres), got {point.tolist()}")
     if T_true is None:
         R = T[:3, :3]
         offset = T[:3, 3] if center is None else R @ point + T[:3, 3] - point
@@ -114,5 +119,10 @@ def pose_error(
     try:
         angle = rotation_angle(R)
     except ValueError as error:
-        raise ValueError(f"T and T_true must be rigid transforms: {error}") from None
+        which = (
+            "T must be a rigid transform"
+            if T_true is None
+            else "T and T_true must be rigid transforms"
+        )
+        raise ValueError(f"{which}: {error}") from None
     return PoseError(float(np.linalg.norm(offset)), angle)

@@ -159,7 +159,10 @@ def cli(*argv: str) -> tuple[int, str]:
 
     err, out = io.StringIO(), io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
-        code = cli_main(list(argv))
+        try:
+            code = cli_main(list(argv))
+        except SystemExit as stop:  # argparse refused an argument
+            code = int(stop.code or 0)
     return code, err.getvalue()
 
 
@@ -1051,6 +1054,75 @@ CASES = [
         "cli/tiny voxel",
         lambda f: cli("align", f.path("model.pcd"), f.path("scene.pcd"), "--voxel-size", "1e-9"),
         check=exits(2, "voxel_size"),
+    ),
+    # Issue 34's findings on the Python side: each a row.
+    Case(
+        "servo params/nan backoff",
+        lambda f: svs.ServoParams(relocalize_backoff=NAN),
+        TypeError,
+        "relocalize_backoff must be an integer",
+    ),
+    Case(
+        "servo params/fractional steps",
+        lambda f: svs.ServoParams(refute_steps=2.5),
+        TypeError,
+        "refute_steps must be an integer",
+    ),
+    Case(
+        "servo params/gain as text",
+        lambda f: svs.ServoParams(lambda_t="2"),
+        TypeError,
+        r"lambda_t must be a number, got '2' \(str\)",
+    ),
+    Case(
+        "servo params/share as text",
+        lambda f: svs.ServoParams(min_fitness="high"),
+        TypeError,
+        "min_fitness must be a number",
+    ),
+    Case(
+        "pose_error/bottom row",
+        lambda f: svs.pose_error(
+            np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 2, 3, 4]])
+        ),
+        ValueError,
+        r"T must have the bottom row \[0, 0, 0, 1\]",
+    ),
+    Case(
+        "pose_error/nan center",
+        lambda f: svs.pose_error(np.eye(4), np.eye(4), center=[NAN, 0, 0]),
+        ValueError,
+        "center must be 3 finite numbers",
+    ),
+    Case(
+        "pose_error/nan transform",
+        lambda f: svs.pose_error(np.full((4, 4), NAN)),
+        ValueError,
+        "T must be finite",
+    ),
+    Case(
+        "servo step/nan motion",
+        lambda f: svs.SpectralServo(OBJECT).step(OBJECT, np.full((4, 4), NAN), now=0.0),
+        ValueError,
+        "T_previous_current must be a finite 4x4 transform",
+    ),
+    Case(
+        "servo step/motion not rigid",
+        lambda f: svs.SpectralServo(OBJECT).step(OBJECT, 2 * np.eye(4), now=0.0),
+        ValueError,
+        "T_previous_current must be a rigid transform",
+    ),
+    Case(
+        "cli/nan error limit",
+        lambda f: cli(
+            "align", f.path("model.pcd"), f.path("scene.pcd"), "--max-rotation-error", "nan"
+        ),
+        check=exits(2, "--max-rotation-error: must be a finite number > 0"),
+    ),
+    Case(
+        "cli/negative seed",
+        lambda f: cli("servo-sim", "--seed", "-1", "--no-figures"),
+        check=exits(2, "--seed: must be an integer in [0, 2**32)"),
     ),
     Case(
         "cli/not converged exits 1",

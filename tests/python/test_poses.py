@@ -64,7 +64,7 @@ def test_bad_poses_are_refused():
         svs.pose_error(np.eye(3))
     with pytest.raises(ValueError, match="T_true must be a 4x4"):
         svs.pose_error(np.eye(4), np.eye(3))
-    with pytest.raises(ValueError, match="center must be 3 numbers"):
+    with pytest.raises(ValueError, match="center must be 3 finite numbers"):
         svs.pose_error(np.eye(4), np.eye(4), center=[1.0, 2.0])
 
 
@@ -143,8 +143,10 @@ def test_the_so3_helpers_refuse_bad_input_by_name():
         svs.rotation_angle(np.eye(4))
     with pytest.raises(ValueError, match="R is not finite"):
         svs.rotation_angle(np.full((3, 3), np.nan))
-    with pytest.raises(ValueError, match="T and T_true must be rigid transforms"):
+    with pytest.raises(ValueError, match="T must be a rigid transform: R is not a rotation"):
         svs.pose_error(np.diag([2.0, 1.0, 1.0, 1.0]))
+    with pytest.raises(ValueError, match="T and T_true must be rigid transforms"):
+        svs.pose_error(np.eye(4), np.diag([2.0, 1.0, 1.0, 1.0]))
 
 
 def test_the_servo_and_the_plots_use_the_one_function():

@@ -221,6 +221,14 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _seed(text: str) -> int:
+    """A seed of NumPy's generators: an integer in [0, 2**32)."""
+    value = int(text)
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2**32), got {value}")
+    return value
+
+
 def add_sensor_origin(group: Any, role: str, flag: str = "--sensor-origin") -> None:
     """``flag X Y Z``: a sensor's position in its cloud's coordinates, metres (default the
     origin: a depth camera's cloud in its own frame); ``role`` says what it is used for."""
@@ -252,14 +260,14 @@ def add_check_arguments(check: Any, ground_truth: str) -> None:
     check.add_argument("--ground-truth", type=Path, metavar="FILE", help=ground_truth)
     check.add_argument(
         "--max-rotation-error",
-        type=float,
+        type=_positive_float,
         default=MAX_ROTATION_ERROR,
         metavar="DEG",
         help=f"exit 1 above this rotation error (default: {MAX_ROTATION_ERROR:g})",
     )
     check.add_argument(
         "--max-translation-error",
-        type=float,
+        type=_positive_float,
         default=MAX_TRANSLATION_ERROR,
         metavar="MM",
         help=f"exit 1 above this translation error (default: {MAX_TRANSLATION_ERROR:g})",

@@ -24,6 +24,7 @@ from spectral_vs.cli.common import (
     _plotting,
     _positive_float,
     _positive_int,
+    _seed,
     _translation,
     _within,
     _write,
@@ -111,7 +112,7 @@ def add_parser(commands: Any, formatter: Any) -> None:
         "--synthetic", action="store_true", help="use the generated scene even if the scans exist"
     )
     demo.add_argument(
-        "--seed", type=int, default=0, help="seed of the generated scene (default: 0)"
+        "--seed", type=_seed, default=0, help="seed of the generated scene (default: 0)"
     )
     demo.add_argument(
         "--check",

@@ -17,6 +17,7 @@ from spectral_vs.cli.common import (
     _plotting,
     _positive_float,
     _positive_int,
+    _seed,
 )
 
 
@@ -42,7 +43,9 @@ def add_parser(commands: Any, formatter: Any) -> None:
 
 def _add_start_arguments(servo: Any) -> None:
     """The arm and its start poses: --seed to --set."""
-    servo.add_argument("--seed", type=int, default=0, help="seed of the start poses (default: 0)")
+    servo.add_argument(
+        "--seed", type=_seed, default=0, help="seed of the start poses, in [0, 2**32) (default: 0)"
+    )
     servo.add_argument(
         "--starts",
         type=_positive_int,

@@ -30,6 +30,23 @@ _CLOCK_TOLERANCE = 1e-9
 _OCCLUSION_REFERENCE_POINTS = 5000
 
 
+def _motion_step(T_previous_current: np.ndarray) -> np.ndarray:
+    """``T_previous_current`` checked: a finite rigid 4 x 4 transform (ValueError naming it)."""
+    T = np.asarray(T_previous_current, dtype=float)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise ValueError(
+            f"T_previous_current must be a finite 4x4 transform (the camera's motion since "
+            f"the last step), got shape {T.shape}{'' if T.shape != (4, 4) else ' with NaN/inf'}"
+        )
+    R = T[:3, :3]
+    rigid = np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0
+    if not rigid or not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-9):
+        raise ValueError(
+            "T_previous_current must be a rigid transform ([R t; 0 0 0 1], R a rotation)"
+        )
+    return T
+
+
 class SensorFaults(ControllerState):
     """The fault tests of :class:`~spectral_vs.servo.SpectralServo` (a base class of it:
     the tests read and keep the controller's state)."""
@@ -111,7 +128,7 @@ class SensorFaults(ControllerState):
         motion since the last accepted step, since the first step and since the last frame
         came first; return the first (``T_accepted_current``)."""
         if T_previous_current is not None:
-            step = np.asarray(T_previous_current, dtype=float)
+            step = _motion_step(T_previous_current)
             self._motion = self._motion @ step
             self._odometry = self._odometry @ step
             self._frame_motion = self._frame_motion @ step

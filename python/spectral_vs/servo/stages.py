@@ -6,6 +6,7 @@ default to 0: derived from the reference when the servo is constructed
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -14,10 +15,19 @@ from spectral_vs._core import AlignParams, ViewAlignParams
 ServoMode = Literal["iteration", "pose"]
 
 
+def _check_number(params: Any, name: str) -> Any:
+    """The setting ``name`` of ``params``, refused unless a real number (TypeError naming
+    it): ``lambda_t='2'`` would otherwise fail in a comparison that names nothing."""
+    value = getattr(params, name)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
+    return value
+
+
 def _check_positive(params: Any, names: tuple[str, ...]) -> None:
     """Refuse settings ``names`` of ``params`` that are not > 0 (ValueError)."""
     for name in names:
-        value = getattr(params, name)
+        value = _check_number(params, name)
         if not value > 0:  # also refuses NaN; inf turns a limit off
             raise ValueError(f"{name} must be > 0, got {value}")
 
@@ -27,7 +37,7 @@ def _check_lengths(params: Any, names: tuple[str, ...], off: str = "") -> None:
     unless ``off`` says what ``inf`` means (ValueError naming the setting). 0 is valid:
     derived from the reference when the servo is constructed (:mod:`spectral_vs.servo.scale`)."""
     for name in names:
-        value = getattr(params, name)
+        value = _check_number(params, name)
         if not (value >= 0 and (off or math.isfinite(value))):
             meaning = f"0: derived from the reference{'; inf: ' + off if off else ''}"
             raise ValueError(
@@ -37,15 +47,17 @@ def _check_lengths(params: Any, names: tuple[str, ...], off: str = "") -> None:
 
 def _check_at_least(params: Any, name: str, low: int, unit: str = "") -> None:
     """Refuse the setting ``name`` of ``params`` under ``low`` (ValueError)."""
-    value = getattr(params, name)
-    if value < low:
+    value = _check_number(params, name)
+    if not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer, got {value!r}")
+    if not value >= low:
         raise ValueError(f"{name} must be >= {low}{' ' + unit if unit else ''}, got {value}")
 
 
 def _check_share(params: Any, names: tuple[str, ...]) -> None:
     """Refuse settings ``names`` of ``params`` outside [0, 1] (ValueError)."""
     for name in names:
-        value = getattr(params, name)
+        value = _check_number(params, name)
         if not 0.0 <= value <= 1.0:
             raise ValueError(f"{name} must be in [0, 1], got {value}")
 
