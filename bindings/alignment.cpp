@@ -302,7 +302,7 @@ max_voxels : int
       .def_readwrite("max_seconds", &AlignParams::max_seconds)
       .def_property(
           "max_voxels", [](const AlignParams& p) { return p.limits.max_voxels; },
-          [](AlignParams& p, std::size_t v) { p.limits.max_voxels = v; });
+          [](AlignParams& p, long long v) { p.limits.max_voxels = to_max_voxels(v); });
 }
 
 }  // namespace

@@ -11,7 +11,9 @@
 #include <pybind11/pybind11.h>
 
 #include <array>
+#include <filesystem>
 #include <string>
+#include <system_error>
 #include <utility>
 
 namespace spectral_vs::python {
@@ -99,6 +101,42 @@ inline constexpr Choices<EgiMethod, 2> kEgiMethods{
     {{"projection", EgiMethod::projection}, {"histogram", EgiMethod::histogram}}};
 
 /// The normals of a PointCloud (which must have them) or an (N, 3) float array of normals.
+/// A voxel budget from Python: an int >= 1, named (a negative int otherwise fails the
+/// size_t conversion with a message that names no limit).
+inline std::size_t to_max_voxels(long long value) {
+  if (value < 1) {
+    throw py::value_error("max_voxels must be >= 1 (a voxel budget), got " + std::to_string(value));
+  }
+  return static_cast<std::size_t>(value);
+}
+
+[[noreturn]] inline void raise_path_error(PyObject* type, const char* argument,
+                                          const std::string& what,
+                                          const std::filesystem::path& path) {
+  PyErr_SetString(type, (std::string(argument) + ": " + what + ": " + path.string()).c_str());
+  throw py::error_already_set();
+}
+
+// What a reader is given must be a regular file: a folder, a FIFO (whose reader would
+// block) or a symbolic link loop is named as such, not as a missing file.
+inline void require_file(const std::filesystem::path& path, const char* argument) {
+  std::error_code error;
+  const auto status = std::filesystem::status(path, error);
+  if (error == std::errc::too_many_symbolic_link_levels) {
+    raise_path_error(PyExc_OSError, argument, "too many levels of symbolic links (a loop)", path);
+  }
+  if (error || !std::filesystem::exists(status)) {
+    raise_path_error(PyExc_FileNotFoundError, argument, "no such file", path);
+  }
+  if (std::filesystem::is_directory(status)) {
+    raise_path_error(PyExc_IsADirectoryError, argument, "is a folder, not a file", path);
+  }
+  if (!std::filesystem::is_regular_file(status)) {
+    raise_path_error(PyExc_ValueError, argument, "is not a regular file (a FIFO, socket or device)",
+                     path);
+  }
+}
+
 inline Points normals_of(const py::handle& object) {
   if (py::isinstance<PointCloud>(object)) {
     const auto& cloud = object.cast<const PointCloud&>();

@@ -170,12 +170,7 @@ ValueError
 )doc")
       .def(py::init([](const std::filesystem::path& path, const std::string& base,
                        const std::string& tip, const py::handle& T_tip_camera) {
-             std::error_code error;
-             if (!std::filesystem::exists(path, error)) {
-               PyErr_SetString(PyExc_FileNotFoundError,
-                               ("urdf_path: no such file: " + path.string()).c_str());
-               throw py::error_already_set();
-             }
+             require_file(path, "urdf_path");
              return Kinematics(path.string(), base, tip, camera_offset(T_tip_camera));
            }),
            py::arg("urdf_path"), py::arg("base_link"), py::arg("tip_link"),

@@ -40,14 +40,6 @@ constexpr Choices<PcdEncoding, 3> kEncodings{
      {"binary", PcdEncoding::binary},
      {"binary_compressed", PcdEncoding::binary_compressed}}};
 
-void require_file(const std::filesystem::path& path) {
-  std::error_code error;
-  if (!std::filesystem::exists(path, error)) {
-    PyErr_SetString(PyExc_FileNotFoundError, ("path: no such file: " + path.string()).c_str());
-    throw py::error_already_set();
-  }
-}
-
 py::array grid_values(const VoxelGrid& grid, py::handle owner) {
   const auto& d = grid.spec.dims;
   const auto f = static_cast<py::ssize_t>(sizeof(float));
@@ -137,7 +129,7 @@ drop_non_finite : bool
   m.def(
       "load_cloud_with_info",
       [](const std::filesystem::path& path) {
-        require_file(path);
+        require_file(path, "path");
         CloudFileInfo info;
         PointCloud cloud;
         {
@@ -151,7 +143,7 @@ drop_non_finite : bool
   m.def(
       "load_organized",
       [](const std::filesystem::path& path) {
-        require_file(path);
+        require_file(path, "path");
         CloudFileInfo info;
         Points points;
         {
@@ -194,8 +186,8 @@ drop_non_finite : bool
       });
 
   const PlaneDetectionParams plane_defaults;
-  auto plane_params = [](double direction_cone, double member_cone, double offset_bin,
-                         double band, double min_share) {
+  auto plane_params = [](double direction_cone, double member_cone, double offset_bin, double band,
+                         double min_share) {
     PlaneDetectionParams params;
     params.direction_cone = direction_cone;
     params.member_cone = member_cone;
@@ -304,11 +296,12 @@ drop_non_finite : bool
 
   m.def(
       "make_grid_spec",
-      [](const PointCloud& a, const PointCloud& b, double resolution, std::size_t max_voxels) {
-        return make_grid_spec(bounding_box(a), bounding_box(b), resolution, GridLimits{max_voxels});
+      [](const PointCloud& a, const PointCloud& b, double resolution, long long max_voxels) {
+        return make_grid_spec(bounding_box(a), bounding_box(b), resolution,
+                              GridLimits{to_max_voxels(max_voxels)});
       },
       py::arg("cloud_a"), py::arg("cloud_b"), py::arg("resolution"),
-      py::arg("max_voxels") = GridLimits{}.max_voxels,
+      py::arg("max_voxels") = static_cast<long long>(GridLimits{}.max_voxels),
       "A grid holding both clouds in which their shift cannot alias; refuses grids over "
       "max_voxels.");
 
@@ -332,13 +325,13 @@ drop_non_finite : bool
   m.def(
       "voxelize",
       [](const PointCloud& cloud, const GridSpec& spec, const std::string& occupancy,
-         std::size_t max_voxels) {
+         long long max_voxels) {
         const Occupancy parsed = parse_choice(occupancy, kOccupancies, "occupancy");
         py::gil_scoped_release release;
-        return voxelize(cloud, spec, parsed, GridLimits{max_voxels});
+        return voxelize(cloud, spec, parsed, GridLimits{to_max_voxels(max_voxels)});
       },
       py::arg("cloud"), py::arg("spec"), py::arg("occupancy") = "binary",
-      py::arg("max_voxels") = GridLimits{}.max_voxels,
+      py::arg("max_voxels") = static_cast<long long>(GridLimits{}.max_voxels),
       "Voxel grid of a cloud: 'binary' (eq. 2), 'count' or 'trilinear' occupancy.");
 
   m.def(

@@ -60,13 +60,12 @@ void warn_tuple_unpacking() {
   }
 }
 
-PhaseCorrelationParams make_params(bool subvoxel, double band, int threads,
-                                   std::size_t max_voxels) {
+PhaseCorrelationParams make_params(bool subvoxel, double band, int threads, long long max_voxels) {
   PhaseCorrelationParams params;
   params.subvoxel = subvoxel;
   params.subvoxel_band = band;
   params.threads = threads;
-  params.limits.max_voxels = max_voxels;
+  params.limits.max_voxels = to_max_voxels(max_voxels);
   return params;
 }
 
@@ -133,11 +132,12 @@ max_voxels : int
     per voxel).
 )doc")
       .def(py::init([](const GridSpec& spec, bool subvoxel, double band, int threads,
-                       std::size_t max_voxels) {
+                       long long max_voxels) {
              return PhaseCorrelation(spec, make_params(subvoxel, band, threads, max_voxels));
            }),
            py::arg("spec"), py::arg("subvoxel") = true, py::arg("subvoxel_band") = 0.25,
-           py::arg("threads") = 1, py::arg("max_voxels") = GridLimits{}.max_voxels)
+           py::arg("threads") = 1,
+           py::arg("max_voxels") = static_cast<long long>(GridLimits{}.max_voxels))
       .def("set_target", &PhaseCorrelation::set_target, py::arg("target"),
            py::call_guard<py::gil_scoped_release>())
       .def(
@@ -171,7 +171,7 @@ max_voxels : int
   m.def(
       "phase_correlation",
       [](const py::handle& grid_a, const py::handle& grid_b, bool subvoxel, double band,
-         std::size_t max_voxels) {
+         long long max_voxels) {
         const VoxelGrid a = to_grid(grid_a, "grid_a");
         const VoxelGrid b = to_grid(grid_b, "grid_b");
         TranslationEstimate estimate;
@@ -182,7 +182,8 @@ max_voxels : int
         return estimate;
       },
       py::arg("grid_a"), py::arg("grid_b"), py::arg("subvoxel") = true,
-      py::arg("subvoxel_band") = 0.25, py::arg("max_voxels") = GridLimits{}.max_voxels, R"doc(
+      py::arg("subvoxel_band") = 0.25,
+      py::arg("max_voxels") = static_cast<long long>(GridLimits{}.max_voxels), R"doc(
 The shift of grid_a onto grid_b, grid_b(x) ~ grid_a(x - shift), as a TranslationEstimate:
 ``shift`` in metres, ``shift_voxels``, ``peak_voxels`` and the peak height in [0, 1].
 

@@ -577,7 +577,8 @@ std::vector<Case> cases() {
        },
        ""},
       {"fft_size_too_large", [] { fft_friendly_size(kMaxGridIndex + 1); }, "n must be <="},
-      {"fft_size_negative", [] { EXPECT_EQ(fft_friendly_size(-5), 2); }, ""},
+      {"fft_size_negative", [] { fft_friendly_size(-5); }, "n must be >= 1, got -5"},
+      {"fft_size_zero", [] { fft_friendly_size(0); }, "n must be >= 1, got 0"},
 
       // EGI and spherical harmonics.
       {"egi_bandwidth_zero", [] { egi_histogram(object().normals(), 0); },
@@ -585,6 +586,19 @@ std::vector<Case> cases() {
       {"egi_bandwidth_large", [] { egi_histogram(object().normals(), 129); },
        "bandwidth must be in [1, 128]"},
       {"egi_no_normals", [] { egi_histogram(Points(), 4); }, "normals is empty"},
+      {"egi_negative_weight",
+       [] {
+         const Eigen::VectorXd weights = Eigen::VectorXd::Constant(1, -1.0);
+         egi_histogram(rows({{0, 0, 1}}), 4, &weights);
+       },
+       "weights: entry 0 must be finite and >= 0"},
+      {"so3_exp_huge_vector",
+       [] {
+         const Eigen::Matrix3d R = exp_so3(Eigen::Vector3d(1e200, 0.0, 0.0));
+         EXPECT_TRUE(R.allFinite());
+         EXPECT_LT((R * R.transpose() - Eigen::Matrix3d::Identity()).norm(), 1e-9);
+       },
+       ""},
       {"egi_nan_normal",
        [] {
          egi_histogram(rows({{kNaN, 0, 1}}), 4);

@@ -269,7 +269,7 @@ TEST(JointVelocities, AJointBeyondItsMarginOnlyMovesBack) {
 // --- Joint-limit avoidance in the redundancy --------------------------------------------
 
 // A 7-joint arm (one more than the task needs): revolute joints about z, y, z, y, z, y, x
-// with offsets, asymmetric limits, no velocity limits (no scaling in these tests).
+// with offsets, asymmetric limits, velocity limits too high to scale (none in these tests).
 Kinematics redundant_arm() {
   const char* axes[] = {"0 0 1", "0 1 0", "0 0 1", "0 1 0", "0 0 1", "0 1 0", "1 0 0"};
   const double lower[] = {-2.9, -2.0, -2.9, -2.1, -2.9, -1.5, -3.0};
@@ -281,7 +281,7 @@ Kinematics redundant_arm() {
         << "<parent link='l" << i << "'/><child link='l" << i + 1 << "'/>"
         << "<origin xyz='0.02 0.01 " << 0.1 + 0.03 * i << "' rpy='0.1 0 " << 0.2 * i << "'/>"
         << "<axis xyz='" << axes[i] << "'/><limit lower='" << lower[i] << "' upper='" << upper[i]
-        << "' velocity='0' effort='10'/></joint>";
+        << "' velocity='1e6' effort='10'/></joint>";
   }
   xml << "</robot>";
   return Kinematics::from_urdf_string(xml.str(), "l0", "l7", camera_offset());

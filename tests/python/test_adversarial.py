@@ -53,6 +53,22 @@ PCD_HEADER = (
 class Files:
     """A folder of prepared inputs: ``files.path(name)`` for each name written here."""
 
+    def fifo(self) -> Path:
+        """A named pipe (a reader of it would block until a writer comes)."""
+        import os
+
+        path = self.folder / "pipe.pcd"
+        if not path.exists():
+            os.mkfifo(path)
+        return path
+
+    def loop(self) -> Path:
+        """A symbolic link to itself."""
+        path = self.folder / "loop.pcd"
+        if not path.is_symlink():
+            path.symlink_to(path.name)
+        return path
+
     def __init__(self, folder: Path) -> None:
         self.folder = folder
         svs.save_cloud(folder / "model.pcd", OBJECT, "binary")
@@ -305,7 +321,12 @@ CASES = [
         FileNotFoundError,
         "no such file",
     ),
-    Case("load/folder", lambda f: svs.load_cloud(f.folder), ValueError, "unsupported extension"),
+    Case(
+        "load/folder",
+        lambda f: svs.load_cloud(f.folder),
+        IsADirectoryError,
+        "path: is a folder, not a file",
+    ),
     Case(
         "load/extension",
         lambda f: svs.load_cloud(f.path("cloud.xyz")),
@@ -816,8 +837,8 @@ CASES = [
     Case(
         "align/max_voxels negative",
         lambda f: svs.align(OBJECT, OBJECT, max_voxels=-1),
-        TypeError,
-        "'max_voxels'",
+        ValueError,
+        "max_voxels must be >= 1",
     ),
     Case(
         "align/max_voxels 1000",
@@ -1123,6 +1144,84 @@ CASES = [
         "cli/negative seed",
         lambda f: cli("servo-sim", "--seed", "-1", "--no-figures"),
         check=exits(2, "--seed: must be an integer in [0, 2**32)"),
+    ),
+    # Issue 34's findings on the C++ side.
+    Case(
+        "fft_friendly_size/zero",
+        lambda f: svs.fft_friendly_size(0),
+        ValueError,
+        "n must be >= 1, got 0",
+    ),
+    Case(
+        "fft_friendly_size/negative",
+        lambda f: svs.fft_friendly_size(-5),
+        ValueError,
+        "n must be >= 1, got -5",
+    ),
+    Case(
+        "so3_exp/huge vector",
+        lambda f: svs.so3_exp([1e200, 0.0, 0.0]),
+        check=lambda R: np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-9),
+    ),
+    Case(
+        "egi/negative weight",
+        lambda f: svs.egi(NORMALS[:10], 4, -np.ones(10)),
+        ValueError,
+        "weights: entry 0 must be finite and >= 0",
+    ),
+    Case(
+        "dominant_direction/zero normals",
+        lambda f: svs.dominant_direction(np.zeros((5, 3))),
+        ValueError,
+        "normals: row 0 is not a unit vector",
+    ),
+    Case(
+        "dominant_direction/nan normals",
+        lambda f: svs.dominant_direction(np.full((5, 3), NAN)),
+        ValueError,
+        "normals: row 0 is not a unit vector",
+    ),
+    Case(
+        "save_cloud/beyond float32",
+        lambda f: svs.save_cloud(
+            f.folder / "huge.pcd", svs.PointCloud(np.array([[1e39, 0.0, 0.0]]))
+        ),
+        ValueError,
+        "point 0 has a coordinate beyond the float32 range",
+    ),
+    Case(
+        "align params/negative max_voxels",
+        lambda f: svs.AlignParams(max_voxels=-1),
+        ValueError,
+        "max_voxels must be >= 1",
+    ),
+    Case(
+        "voxelize/negative max_voxels",
+        lambda f: svs.make_grid_spec(OBJECT, OBJECT, 0.01, -1),
+        ValueError,
+        "max_voxels must be >= 1",
+    ),
+    Case(
+        "load_cloud/fifo",
+        lambda f: svs.load_cloud(str(f.fifo())),
+        ValueError,
+        r"path: is not a regular file \(a FIFO",
+    ),
+    Case(
+        "load_cloud/symlink loop",
+        lambda f: svs.load_cloud(str(f.loop())),
+        OSError,
+        "too many levels of symbolic links",
+    ),
+    Case(
+        "urdf/zero velocity limit",
+        lambda f: svs.Kinematics.from_urdf_string(
+            URDF.read_text().replace('velocity="2.0"', 'velocity="0"', 1),
+            "base_link",
+            "tool",
+        ),
+        ValueError,
+        "velocity limit 0: it must be > 0",
     ),
     Case(
         "cli/not converged exits 1",

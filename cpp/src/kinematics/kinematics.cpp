@@ -107,8 +107,11 @@ void append_limits(const urdf::Joint& joint, std::vector<double>& lower, std::ve
   const bool bounded = joint.type != urdf::Joint::CONTINUOUS && joint.limits;
   lower.push_back(bounded ? joint.limits->lower : -kInfinity);
   upper.push_back(bounded ? joint.limits->upper : kInfinity);
-  const bool has_speed = joint.limits && joint.limits->velocity > 0.0;
-  velocity.push_back(has_speed ? joint.limits->velocity : kInfinity);
+  if (joint.limits && !(joint.limits->velocity > 0.0)) {
+    fail("urdf: joint '", joint.name, "' has velocity limit ", joint.limits->velocity,
+         ": it must be > 0 rad/s (or m/s)");
+  }
+  velocity.push_back(joint.limits ? joint.limits->velocity : kInfinity);
   if (bounded && !(lower.back() <= upper.back())) {
     fail("urdf: joint '", joint.name, "' has lower limit ", lower.back(), " above upper limit ",
          upper.back());
@@ -130,7 +133,13 @@ Transform to_transform(const KDL::Frame& F) {
 
 std::string read_file(const std::string& path) {
   std::error_code error;
-  if (!std::filesystem::is_regular_file(path, error)) fail("urdf_path: no such file: '", path, "'");
+  const auto status = std::filesystem::status(path, error);
+  if (std::filesystem::is_directory(status))
+    fail("urdf_path: is a folder, not a file: '", path, "'");
+  if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status)) {
+    fail("urdf_path: is not a regular file (a FIFO, socket or device): '", path, "'");
+  }
+  if (!std::filesystem::is_regular_file(status)) fail("urdf_path: no such file: '", path, "'");
   std::ifstream in(path);
   if (!in) fail("urdf_path: cannot read '", path, "'");
   std::ostringstream text;

@@ -659,6 +659,14 @@ Points load_points(const std::string& path, CloudFileInfo* info) {
 void save_cloud(const std::string& path, const PointCloud& cloud, PcdEncoding encoding) {
   const Format format = format_from_extension(path);
   require_non_empty(cloud, "cloud");
+  // The files store float32: a coordinate beyond its range would be written as inf.
+  constexpr double kFloatMax = double(std::numeric_limits<float>::max());
+  for (Eigen::Index i = 0; i < cloud.points().rows(); ++i) {
+    if (!(cloud.points().row(i).cwiseAbs().maxCoeff() <= kFloatMax)) {
+      fail("cloud: point ", i, " has a coordinate beyond the float32 range of the file (",
+           kFloatMax, " m)");
+    }
+  }
   pcl::PCLPointCloud2 message;
   if (cloud.has_normals()) {
     pcl::PointCloud<pcl::PointNormal> pcl_cloud;

@@ -1,5 +1,7 @@
 #include "spectral_vs/representation/dominant_plane.hpp"
 
+#include "common/checks.hpp"
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -87,6 +89,12 @@ DominantDirection dominant_direction(const Points& normals, const PlaneDetection
   check(params);
   DominantDirection out;
   if (normals.rows() == 0) return out;
+  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
+    const double length = normals.row(i).norm();
+    if (!(std::abs(length - 1.0) <= 1e-3)) {
+      detail::fail("normals: row ", i, " is not a unit vector (length ", length, ")");
+    }
+  }
   const Eigen::Vector3d axis = common_direction(normals, params.direction_cone);
   if (!(axis.norm() > 0.5)) return out;  // no normal within the cone of another
   const double parallel = std::cos(params.member_cone);

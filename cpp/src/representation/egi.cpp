@@ -44,7 +44,9 @@ SphereGrid egi_histogram(const Points& normals, int bandwidth, const Eigen::Vect
     if (!n.allFinite() || n.norm() == 0.0)
       fail("normals: row ", i, " is not finite or has zero length");
     const double weight = weights ? (*weights)[i] : 1.0;
-    if (!std::isfinite(weight)) fail("weights: entry ", i, " is not finite");
+    if (!(std::isfinite(weight) && weight >= 0.0)) {
+      fail("weights: entry ", i, " must be finite and >= 0 (a count of points), got ", weight);
+    }
     const Eigen::Vector2i cell = egi_cell(n, bandwidth);
     grid(cell.x(), cell.y()) += weight;
   }

@@ -26,6 +26,7 @@ constexpr int kFastLengths[] = {2,  4,   6,   8,   10,  12,  16,  20,  32,  36, 
 }  // namespace
 
 int fft_friendly_size(int n) {
+  if (n < 1) fail("n must be >= 1, got ", n);
   if (n > kMaxGridIndex) fail("n must be <= ", kMaxGridIndex, ", got ", n);
   for (const int length : kFastLengths) {
     if (length >= n) return length;

@@ -15,7 +15,13 @@ Eigen::Matrix3d hat(const Eigen::Vector3d& v) {
   return m;
 }
 
-Eigen::Matrix3d exp_so3(const Eigen::Vector3d& omega) {
+Eigen::Matrix3d exp_so3(const Eigen::Vector3d& given) {
+  // A turn of 2 pi more is the same rotation: beyond it the angle is reduced, so that
+  // K K of a huge vector cannot overflow (1e200 rad gave NaN).
+  Eigen::Vector3d omega = given;
+  const double full = omega.stableNorm();      // no overflow of the squares of 1e200
+  constexpr double kTurn = 6.283185307179586;  // 2 pi
+  if (std::isfinite(full) && full > kTurn) omega *= std::fmod(full, kTurn) / full;
   const double angle = omega.norm();
   const Eigen::Matrix3d K = hat(omega);
   // Taylor terms below 1e-4 rad keep sin(t)/t and (1 - cos t)/t^2 exact to rounding.

@@ -124,6 +124,12 @@ class SpectralServo(SensorFaults, Relocalization):
             self.params.plane.min_plane_share,
             nearest=True,
         )
+        # How high the reference's scene stands above its plane (the tallest object), m.
+        self._reference_height: float | None = None
+        if self._reference_plane is not None:
+            normal, distance = self._reference_plane
+            heights = np.asarray(self._reference_view.points) @ normal + distance
+            self._reference_height = float(np.percentile(heights, 99.9))
         self.reset()
 
     def reset(self) -> None:
@@ -288,6 +294,8 @@ class SpectralServo(SensorFaults, Relocalization):
             return self._hold(record, "occluded", outage, now, start)
 
         relocalize = self.params.relocalization.relocalize
+        if relocalize and not self._anchored:
+            cloud = self._drop_above_the_scene(cloud, record)
         if self._since_relocalization is not None:
             self._since_relocalization += 1
         if relocalize and self._lost and self._relocalization_due():

@@ -29,6 +29,7 @@ class ControllerState:
     _centroid: np.ndarray
     _occlusion_reference: np.ndarray  #: a strided subsample of the reference's points
     _reference_plane: tuple[np.ndarray, float] | None  #: its dominant plane (normal, distance)
+    _reference_height: float | None  #: how high its scene stands above that plane, m
 
     # What the controller remembers between steps (set by reset()).
     _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
@@ -43,6 +44,10 @@ class ControllerState:
     _confirmed: bool  #: the last relocalization was taken and confirmed
     _unconfirmed: int  #: relocalizations in a row not confirmed (the backoff)
     _failed_relocalizations: int  #: relocalizations in a row under the score (the recovery)
+    _widening_tries: int  #: of them, from the recovery's target, no occluder (its standoff)
+    _recovery_arrived: bool  #: the camera is at the recovery's target
+    #: The recovery's plane (normal, distance) in the frame first seen, and T_first_that frame.
+    _scene_plane: tuple[np.ndarray, float, np.ndarray] | None
     _recovery_steps: int
     _T_motion_backoff: np.ndarray | None  #: _motion at the back-off's start
     _settled: bool  #: converged and not re-engaged since (the hysteresis)
