@@ -18,7 +18,9 @@ PointCloud::PointCloud(Points points, Points normals)
     : points_(std::move(points)), normals_(std::move(normals)) {
   for (Eigen::Index i = 0; i < points_.rows(); ++i) {
     if (!row_finite(points_, i)) {
-      fail("points: row ", i, " is not finite; drop such rows first (remove_non_finite)");
+      fail("points: row ", i,
+           " is not finite; drop such rows first (Python: PointCloud(..., drop_non_finite=True);"
+           " C++: remove_non_finite)");
     }
   }
   if (normals_.rows() == 0) {
