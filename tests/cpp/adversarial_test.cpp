@@ -8,6 +8,7 @@
 #include <spectral_vs/kinematics/kinematics.hpp>
 #include <spectral_vs/representation/cloud_io.hpp>
 #include <spectral_vs/representation/egi.hpp>
+#include <spectral_vs/representation/organized.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
 #include <spectral_vs/rotation/egi_coefficients.hpp>
@@ -579,6 +580,30 @@ std::vector<Case> cases() {
       {"fft_size_too_large", [] { fft_friendly_size(kMaxGridIndex + 1); }, "n must be <="},
       {"fft_size_negative", [] { fft_friendly_size(-5); }, "n must be >= 1, got -5"},
       {"fft_size_zero", [] { fft_friendly_size(0); }, "n must be >= 1, got 0"},
+      {"organized_huge_normal_step",
+       [] {
+         const DepthImage depth = DepthImage::Constant(48, 64, 1.0);
+         OrganizedNormalParams params;
+         params.normal_step = std::numeric_limits<int>::max();
+         organized_cloud(depth, {500.0, 500.0, 32.0, 24.0}, params);
+       },
+       "normal_step must be <= the image's larger side, 64 pixels"},
+      {"organized_huge_window",
+       [] {
+         const DepthImage depth = DepthImage::Constant(48, 64, 1.0);
+         OrganizedNormalParams params;
+         params.window = (1 << 27) + 1;
+         organized_cloud(depth, {500.0, 500.0, 32.0, 24.0}, params);
+       },
+       "window must be <= twice the image's larger side plus one, 129 pixels"},
+      {"organized_image_over_the_cap",
+       [] {
+         // Refused before a pixel is read: the map's few real pixels are never touched.
+         const std::vector<double> few(16, 1.0);
+         const Eigen::Map<const DepthImage> depth(few.data(), 1, Eigen::Index(kMaxDepthPixels) + 1);
+         organized_cloud(depth, {500.0, 500.0, 32.0, 24.0});
+       },
+       "over the 67108864 that a cloud is made of"},
 
       // EGI and spherical harmonics.
       {"egi_bandwidth_zero", [] { egi_histogram(object().normals(), 0); },

@@ -40,6 +40,17 @@ inline bool valid_depth(double z, double low, double high) {
   return (z > 0.0) & (z >= low) & (z <= high) & (z < std::numeric_limits<double>::infinity());
 }
 
+// Buffers kept per thread between frames (released after a frame when large).
+std::vector<double>& metres_buffer() {
+  thread_local std::vector<double> metres;
+  return metres;
+}
+
+std::vector<double>& rows_buffer() {
+  thread_local std::vector<double> rows;
+  return rows;
+}
+
 // The depth in metres, row-major, NaN where the pixel is invalid (see DepthCloudParams):
 // the image itself when it is one block of metres whose every pixel is valid or NaN (a
 // renderer's or a driver's float frame), else a copy in a buffer kept per thread (one
@@ -61,7 +72,7 @@ const double* metric_depth(const Eigen::Ref<const Image>& depth, double scale,
       if (valid + missing == std::size_t(h * w)) return in;
     }
   }
-  thread_local std::vector<double> metres;
+  std::vector<double>& metres = metres_buffer();
   metres.resize(std::size_t(h) * std::size_t(w));
   std::size_t valid = 0;
   const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -84,17 +95,15 @@ const double* metric_depth(const Eigen::Ref<const Image>& depth, double scale,
 template <typename Image>
 std::vector<double>& scan(const Eigen::Ref<const Image>& depth, const Eigen::Matrix3d& K,
                           const DepthCloudParams& params, double default_scale, bool every_pixel) {
-  if (depth.rows() == 0 || depth.cols() == 0) {
-    fail("depth is empty: ", depth.rows(), " x ", depth.cols(), " pixels");
-  }
   const PinholeIntrinsics intrinsics = intrinsics_from_matrix(K, "K");
-  detail::check_organized(intrinsics, params);
+  detail::check_organized(intrinsics, params, depth.rows(), depth.cols());
   check(params);
   const double* metres =
       metric_depth<Image>(depth, params.depth_scale.value_or(default_scale), params);
-  thread_local std::vector<double> rows;
+  std::vector<double>& rows = rows_buffer();
   detail::scan_depth(metres, int(depth.rows()), int(depth.cols()), intrinsics, params,
                      {params.normals, every_pixel}, rows);
+  detail::release_if_large(metres_buffer());
   return rows;
 }
 
@@ -104,6 +113,7 @@ PointCloud cloud_of(const Eigen::Ref<const Image>& depth, const Eigen::Matrix3d&
   const std::vector<double>& rows = scan<Image>(depth, K, params, default_scale, false);
   Points points, normals;
   detail::split_rows(rows, params.normals, points, normals);
+  detail::release_if_large(rows_buffer());
   return PointCloud(std::move(points), std::move(normals));
 }
 
@@ -115,6 +125,7 @@ OrganizedCloud organized_of(const Eigen::Ref<const Image>& depth, const Eigen::M
   out.height = int((depth.rows() + params.stride - 1) / params.stride);
   out.width = int((depth.cols() + params.stride - 1) / params.stride);
   detail::split_rows(rows, params.normals, out.points, out.normals);
+  detail::release_if_large(rows_buffer());
   return out;
 }
 

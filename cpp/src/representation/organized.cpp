@@ -14,7 +14,22 @@ using detail::fail;
 
 namespace detail {
 
-void check_organized(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params) {
+void check_organized(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params,
+                     long long rows, long long cols) {
+  if (rows < 1 || cols < 1) fail("depth is empty: ", rows, " x ", cols, " pixels");
+  if (rows * cols > kMaxDepthPixels) {
+    fail("depth has ", rows, " x ", cols, " pixels, over the ", kMaxDepthPixels,
+         " that a cloud is made of (8192 x 8192)");
+  }
+  const long long side = std::max(rows, cols);
+  if (params.normal_step > side) {
+    fail("normal_step must be <= the image's larger side, ", side, " pixels, got ",
+         params.normal_step);
+  }
+  if (params.window > 2 * side + 1) {
+    fail("window must be <= twice the image's larger side plus one, ", 2 * side + 1,
+         " pixels, got ", params.window);
+  }
   require_positive_finite(intrinsics.fx, "fx");
   require_positive_finite(intrinsics.fy, "fy");
   if (!std::isfinite(intrinsics.cx) || !std::isfinite(intrinsics.cy)) {
@@ -102,7 +117,7 @@ void scan_depth(const double* d, int h, int w, const PinholeIntrinsics& intrinsi
       std::size_t((h + stride - 1) / stride) * std::size_t((w + stride - 1) / stride);
   out.reserve(lattice * 6);
   // Column sums with r zeros on either side: the window's columns need no bounds test.
-  for (auto& c : scratch.columns) c.assign(std::size_t(iw + 2 * r), 0.0);
+  for (auto& c : scratch.columns) c.assign(normals ? std::size_t(iw + 2 * r) : 0, 0.0);
   double* const columns[3] = {scratch.columns[0].data() + r, scratch.columns[1].data() + r,
                               scratch.columns[2].data() + r};
   const double* const crosses[3] = {cross_x, cross_y, cross_z};
@@ -152,6 +167,9 @@ void scan_depth(const double* d, int h, int w, const PinholeIntrinsics& intrinsi
       out.insert(out.end(), {x, y, has_point ? z : nan, n[0], n[1], n[2]});
     }
   }
+  for (auto& c : scratch.cross) release_if_large(c);
+  for (auto& c : scratch.columns) release_if_large(c);
+  release_if_large(scratch.reliable);
 }
 
 void split_rows(const std::vector<double>& rows, bool with_normals, Points& points,
@@ -172,7 +190,7 @@ void split_rows(const std::vector<double>& rows, bool with_normals, Points& poin
 PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,
                            const PinholeIntrinsics& intrinsics,
                            const OrganizedNormalParams& params) {
-  detail::check_organized(intrinsics, params);
+  detail::check_organized(intrinsics, params, depth.rows(), depth.cols());
   // The scan reads one row-major block: an Eigen::Ref with an outer stride is copied.
   DepthImage copy;
   const double* data = depth.data();
@@ -185,6 +203,7 @@ PointCloud organized_cloud(const Eigen::Ref<const DepthImage>& depth,
                      {/*normals=*/true, /*every_pixel=*/false}, rows);
   Points points, normals;
   detail::split_rows(rows, true, points, normals);
+  detail::release_if_large(rows);
   return PointCloud(std::move(points), std::move(normals));
 }
 

@@ -16,8 +16,17 @@ struct ScanOutput {
                              ///< else those with a normal (with normals) or a point.
 };
 
-/// Throws std::invalid_argument for invalid intrinsics or normal params.
-void check_organized(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params);
+/// Throws std::invalid_argument for invalid intrinsics or normal params, or for an image of
+/// `rows` x `cols` pixels that is empty, over kMaxDepthPixels, or smaller than the stencil
+/// allows (normal_step over its larger side, window over twice that plus one).
+void check_organized(const PinholeIntrinsics& intrinsics, const OrganizedNormalParams& params,
+                     long long rows, long long cols);
+
+/// Frees `buffer` when it holds more than kKeptScratchBytes.
+template <typename T>
+void release_if_large(std::vector<T>& buffer) {
+  if (buffer.capacity() * sizeof(T) > kKeptScratchBytes) std::vector<T>().swap(buffer);
+}
 
 /// Appends x, y, z, nx, ny, nz (metres, unit normal toward the camera; NaN where missing)
 /// per written pixel of the h x w row-major metric depth image `depth` (non-finite: no

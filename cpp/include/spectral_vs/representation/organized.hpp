@@ -8,6 +8,7 @@
 #include <spectral_vs/representation/point_cloud.hpp>
 
 #include <Eigen/Core>
+#include <cstddef>
 
 namespace spectral_vs {
 
@@ -33,9 +34,19 @@ struct PinholeIntrinsics {
 /// noise), normalised and oriented toward the camera. A pixel whose four stencil
 /// neighbours are not all within `max_depth_jump` times its depth of it (missing, or
 /// across a silhouette edge) has no reliable normal and adds nothing to the sums.
+/// Largest depth image the clouds are made of, pixels (8192 x 8192): checked before any
+/// buffer is allocated.
+inline constexpr long long kMaxDepthPixels = 1LL << 26;
+
+/// Scratch buffers over this many bytes are released after each call; smaller ones (a
+/// 640 x 480 frame's, about 25 MB) are kept per thread for the next frame of a servo.
+inline constexpr std::size_t kKeptScratchBytes = std::size_t(64) << 20;
+
 struct OrganizedNormalParams {
-  int normal_step = 2;           ///< Half-baseline of the differences, pixels (>= 1).
-  int window = 5;                ///< Side of the averaging window, pixels (odd, >= 1).
+  int normal_step = 2;           ///< Half-baseline of the differences, pixels (>= 1, at most the
+                                 ///< image's larger side).
+  int window = 5;                ///< Side of the averaging window, pixels (odd, >= 1, at most twice
+                                 ///< the image's larger side plus one).
   double max_depth_jump = 0.05;  ///< Largest relative depth change to a stencil neighbour (> 0).
   int stride = 1;                ///< Keep every stride-th pixel along rows and columns (>= 1).
 };
