@@ -580,6 +580,14 @@ std::vector<Case> cases() {
       {"fft_size_too_large", [] { fft_friendly_size(kMaxGridIndex + 1); }, "n must be <="},
       {"fft_size_negative", [] { fft_friendly_size(-5); }, "n must be >= 1, got -5"},
       {"fft_size_zero", [] { fft_friendly_size(0); }, "n must be >= 1, got 0"},
+      {"urdf_nested_too_deep",
+       [] {
+         std::string xml = "<robot name='r'>";
+         for (int i = 0; i < 100000; ++i) xml += "<a>";
+         for (int i = 0; i < 100000; ++i) xml += "</a>";
+         Kinematics::from_urdf_string(xml + "</robot>", "a", "b");
+       },
+       "nested deeper than 256 levels"},
       {"organized_huge_normal_step",
        [] {
          const DepthImage depth = DepthImage::Constant(48, 64, 1.0);

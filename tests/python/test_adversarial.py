@@ -97,6 +97,9 @@ class Files:
         self.write("cloud.xyz", b"0 0 0\n")
         urdf = URDF.read_text()
         self.write("missing_link.urdf", urdf.replace('<link name="link3"/>', "").encode())
+        self.write(
+            "deep.urdf", ("<robot>" + "<a>" * 100_000 + "</a>" * 100_000 + "</robot>").encode()
+        )
         self.write("truncated.urdf", urdf[: len(urdf) // 2].encode())
         self.write(
             "zero_axis.urdf", urdf.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', 1).encode()
@@ -1241,6 +1244,20 @@ CASES = [
         ),
         ValueError,
         "window must be <= twice the image's larger side plus one, 129 pixels",
+    ),
+    Case(
+        "urdf/nested 100000 levels",  # was SIGSEGV after about 7 s (the parser recursed)
+        lambda f: svs.Kinematics.from_urdf_string(
+            "<robot name='r'>" + "<a>" * 100_000 + "</a>" * 100_000 + "</robot>", "a", "b"
+        ),
+        ValueError,
+        "nested deeper than 256 levels",
+    ),
+    Case(
+        "urdf/nested 100000 levels, a file",
+        lambda f: svs.Kinematics(f.path("deep.urdf"), "a", "b"),
+        ValueError,
+        "nested deeper than 256 levels",
     ),
     Case(
         "cli/not converged exits 1",

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -131,6 +132,52 @@ Transform to_transform(const KDL::Frame& F) {
   return T;
 }
 
+// The XML parser under urdfdom recurses once per level of nesting: about 100,000 levels
+// overflowed the stack (SIGSEGV). A URDF is a few levels deep (robot, joint, limit): the
+// depth is counted before anything is parsed.
+constexpr int kMaxUrdfNesting = 256;
+
+void require_shallow_xml(const std::string& xml) {
+  int depth = 0;
+  std::size_t i = 0;
+  const auto skip_past = [&](const char* end) {
+    const std::size_t at = xml.find(end, i);
+    i = at == std::string::npos ? xml.size() : at + std::strlen(end);
+  };
+  while ((i = xml.find('<', i)) != std::string::npos) {
+    if (xml.compare(i, 4, "<!--") == 0) {
+      skip_past("-->");
+    } else if (xml.compare(i, 9, "<![CDATA[") == 0) {
+      skip_past("]]>");
+    } else if (xml.compare(i, 2, "<?") == 0 || xml.compare(i, 2, "<!") == 0) {
+      skip_past(">");
+    } else if (xml.compare(i, 2, "</") == 0) {
+      --depth;
+      skip_past(">");
+    } else {
+      // An opening tag: its end is the first '>' outside a quoted attribute value.
+      char quote = 0;
+      std::size_t j = i + 1;
+      for (; j < xml.size(); ++j) {
+        const char c = xml[j];
+        if (quote) {
+          if (c == quote) quote = 0;
+        } else if (c == '"' || c == '\'') {
+          quote = c;
+        } else if (c == '>') {
+          break;
+        }
+      }
+      const bool closes_itself = j < xml.size() && j > i + 1 && xml[j - 1] == '/';
+      if (!closes_itself && ++depth > kMaxUrdfNesting) {
+        fail("urdf: the XML is nested deeper than ", kMaxUrdfNesting,
+             " levels (a URDF needs a few): refused before parsing");
+      }
+      i = j;
+    }
+  }
+}
+
 std::string read_file(const std::string& path) {
   std::error_code error;
   const auto status = std::filesystem::status(path, error);
@@ -245,6 +292,7 @@ Kinematics Kinematics::from_urdf_string(const std::string& urdf_xml, const std::
                                         const std::string& tip_link,
                                         const Transform& T_tip_camera) {
   require_rigid_transform(T_tip_camera, "T_tip_camera");
+  require_shallow_xml(urdf_xml);
   const urdf::ModelInterfaceSharedPtr urdf_model = urdf::parseURDF(urdf_xml);
   if (!urdf_model) fail("urdf: the XML is not a valid URDF (urdfdom could not parse it)");
   // urdfdom links own their children: a loop of links would own itself and leak. The
