@@ -7,7 +7,10 @@
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cstring>
 #include <filesystem>
@@ -595,7 +598,64 @@ struct FileContents {
   CloudFileInfo info;
 };
 
+// A private copy of a file, removed with the object. PCL memory-maps a binary PCD: when
+// another process rewrites the file under the mapping (a camera pipeline writing frames
+// while a viewer reads them), reading past its new end raised SIGBUS. A copy made with
+// read() cannot fault, and the header check and PCL then see the same bytes.
+class Snapshot {
+ public:
+  explicit Snapshot(const std::string& path) {
+    static std::atomic<unsigned long> count{0};
+    const std::filesystem::path extension = std::filesystem::path(path).extension();
+    path_ = (std::filesystem::temp_directory_path() /
+             ("spectral_vs_" + std::to_string(::getpid()) + "_" + std::to_string(count++) +
+              extension.string()))
+                .string();
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(path, error)) fail("path: no such file: ", path);
+    std::ifstream in(path, std::ios::binary);
+    if (!in) fail("path: cannot read ", path);
+    std::ofstream out(path_, std::ios::binary | std::ios::trunc);
+    std::vector<char> block(std::size_t(1) << 16);
+    while (in.read(block.data(), std::streamsize(block.size())) || in.gcount() > 0) {
+      out.write(block.data(), in.gcount());
+    }
+    out.close();
+    if (!out) {
+      std::filesystem::remove(path_, error);
+      fail("path: cannot copy ", path, " for reading (to ", path_, ")");
+    }
+  }
+  ~Snapshot() {
+    std::error_code ignored;
+    std::filesystem::remove(path_, ignored);
+  }
+  Snapshot(const Snapshot&) = delete;
+  Snapshot& operator=(const Snapshot&) = delete;
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+FileContents read_snapshot(const std::string& path);
+
 FileContents read_file(const std::string& path) {
+  format_from_extension(path);  // an unknown extension is named before the file is read
+  const Snapshot snapshot(path);
+  try {
+    return read_snapshot(snapshot.path());
+  } catch (const std::invalid_argument& error) {
+    // The messages name the file the caller gave.
+    std::string message = error.what();
+    for (std::size_t at; (at = message.find(snapshot.path())) != std::string::npos;) {
+      message.replace(at, snapshot.path().size(), path);
+    }
+    throw std::invalid_argument(message);
+  }
+}
+
+FileContents read_snapshot(const std::string& path) {
   const Format format = format_from_extension(path);
   const std::optional<PlyLayout> ply = check_header(path, format);
   pcl::PCLPointCloud2 cloud;
