@@ -64,6 +64,8 @@ fuzz: system-deps venv
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --preset fuzz
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" cmake --build --preset fuzz
 	fuzz/run_fuzzers.sh build/fuzz $(FUZZ_SECONDS) $(abspath $(DATA))
+	# The Python harness over whole integer ranges (tests/python/test_properties.py), longer.
+	SPECTRAL_VS_HARNESS_EXAMPLES=2000 SPECTRAL_VS_DATA=$(DATA) $(PY) -m pytest -q -p no:cacheprovider tests/python/test_properties.py -k whole_range
 
 # Installs only the Debian packages that are missing, so a second run is instant.
 system-deps:

@@ -16,6 +16,8 @@ examples, so the module gives the same verdict on every run. The properties:
 from __future__ import annotations
 
 import math
+import os
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -393,3 +395,55 @@ def test_grids_and_translation_are_finite_or_refused(a, b, resolution, max_voxel
         return
     assert_finite(call(svs.phase_correlation, ga, gb))
     assert_finite(call(svs.translation_cost, ga, gb, (1, 0, -1)))
+
+
+#: Examples of the whole-range harness: a few in the test run, more with
+#: SPECTRAL_VS_HARNESS_EXAMPLES (``make fuzz`` sets 2000).
+HARNESS_EXAMPLES = int(os.environ.get("SPECTRAL_VS_HARNESS_EXAMPLES", "60"))
+#: What one call may take: seconds of wall time and megabytes of resident memory.
+HARNESS_SECONDS = 10.0
+HARNESS_MEGABYTES = 1024.0
+int64 = st.integers(-(2**63), 2**63 - 1)
+int32_edges = st.sampled_from([-(2**31), -1, 0, 1, 2, 3, 2**16 + 1, 2**30, 2**31 - 1])
+
+
+def resident_megabytes() -> float:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096 / 2**20
+
+
+@settings(
+    derandomize=True,
+    database=None,
+    deadline=None,
+    max_examples=HARNESS_EXAMPLES,
+    suppress_health_check=list(HealthCheck),
+)
+@given(
+    normal_step=st.one_of(int32_edges, int64),
+    window=st.one_of(int32_edges, int64),
+    stride=st.one_of(int32_edges, int64),
+    height=st.integers(1, 48),
+    width=st.integers(1, 64),
+    normals=st.booleans(),
+)
+def test_depth_image_integer_settings_over_their_whole_range(
+    normal_step, window, stride, height, width, normals
+):
+    """cloud_from_depth's integer settings drawn over their whole type range (and beyond:
+    int64): a finite cloud or a documented exception, within 10 s and 1 GB. This is the
+    class of input that crashed the process (normal_step = 2**31 - 1) and took 33 s or 3 GB
+    (window = 2**16 + 1, 2**27 + 1) before the bounds of issue 34."""
+    depth = np.full((height, width), 1.0, np.float32)
+    K = np.array([[50.0, 0.0, width / 2], [0.0, 50.0, height / 2], [0.0, 0.0, 1.0]])
+    before, start = resident_megabytes(), time.monotonic()
+    try:
+        cloud = svs.cloud_from_depth(
+            depth, K, normal_step=normal_step, window=window, stride=stride, normals=normals
+        )
+    except DOCUMENTED:
+        pass
+    else:
+        assert np.isfinite(np.asarray(cloud.points)).all()
+    assert time.monotonic() - start < HARNESS_SECONDS
+    assert resident_megabytes() - before < HARNESS_MEGABYTES

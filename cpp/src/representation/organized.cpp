@@ -30,6 +30,9 @@ void check_organized(const PinholeIntrinsics& intrinsics, const OrganizedNormalP
     fail("window must be <= twice the image's larger side plus one, ", 2 * side + 1,
          " pixels, got ", params.window);
   }
+  if (params.stride > side) {
+    fail("stride must be <= the image's larger side, ", side, " pixels, got ", params.stride);
+  }
   require_positive_finite(intrinsics.fx, "fx");
   require_positive_finite(intrinsics.fy, "fy");
   if (!std::isfinite(intrinsics.cx) || !std::isfinite(intrinsics.cy)) {

@@ -48,7 +48,8 @@ struct OrganizedNormalParams {
   int window = 5;                ///< Side of the averaging window, pixels (odd, >= 1, at most twice
                                  ///< the image's larger side plus one).
   double max_depth_jump = 0.05;  ///< Largest relative depth change to a stencil neighbour (> 0).
-  int stride = 1;                ///< Keep every stride-th pixel along rows and columns (>= 1).
+  int stride = 1;  ///< Keep every stride-th pixel along rows and columns (>= 1, at most the
+                   ///< image's larger side).
 };
 
 /// The point cloud with unit normals, oriented toward the camera, of a depth image, in
