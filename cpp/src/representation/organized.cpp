@@ -121,8 +121,11 @@ void scan_depth(const double* d, int h, int w, const PinholeIntrinsics& intrinsi
   out.reserve(lattice * 6);
   // Column sums with r zeros on either side: the window's columns need no bounds test.
   for (auto& c : scratch.columns) c.assign(normals ? std::size_t(iw + 2 * r) : 0, 0.0);
-  double* const columns[3] = {scratch.columns[0].data() + r, scratch.columns[1].data() + r,
-                              scratch.columns[2].data() + r};
+  // Without normals the columns are empty and unused: no offset into a null buffer.
+  const auto column_start = [&](int c) {
+    return normals ? scratch.columns[c].data() + r : nullptr;
+  };
+  double* const columns[3] = {column_start(0), column_start(1), column_start(2)};
   const double* const crosses[3] = {cross_x, cross_y, cross_z};
   for (int v = 0; v < h; v += stride) {
     const int i = v - s;
