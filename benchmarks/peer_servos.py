@@ -660,10 +660,8 @@ class RegistrationServo:
     # --- clouds ----------------------------------------------------------------------
 
     def _crop(self, cloud: PointCloud | np.ndarray, argument: str) -> tuple[np.ndarray, Any]:
-        if not isinstance(cloud, PointCloud):  # a raw buffer: its invalid returns dropped,
-            rows = np.asarray(cloud, dtype=float)  # as an Open3D user does
-            cloud = rows[np.isfinite(rows).all(axis=1)] if rows.ndim == 2 else rows
-        c = as_cloud(cloud, argument)
+        # A raw buffer's invalid returns are dropped, as an Open3D user does.
+        c = as_cloud(cloud, argument, drop_non_finite=True)
         points = np.asarray(c.points, dtype=float)
         normals = None if c.normals is None else np.asarray(c.normals, dtype=float)
         keep = (points[:, 2] <= self.params.max_depth) & (points[:, 2] > 0)

@@ -45,7 +45,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import peer_servos
 import report as report_lib
+import servo_peers
+from servo_peers import CpuTimed, slug
 
 from spectral_vs import experiment, sim
 from spectral_vs import servo as servo_lib
@@ -76,67 +79,8 @@ DEPTH_SCENARIOS = (
 )
 
 
-def slug(label: str) -> str:
-    return label.lower().replace(" ", "_")
-
-
 def run_file(robot: str, name: str, seed: int, scenario: str, label: str) -> Path:
     return RUNS / f"{robot}_{name}_{seed}_{scenario}_{slug(label)}.json"
-
-
-class CpuTimed:
-    """A controller whose ``step_record`` calls are CPU-timed, s."""
-
-    def __init__(self, controller: Any) -> None:
-        self.controller = controller
-        self.seconds: list[float] = []
-
-    def reset(self) -> None:
-        self.controller.reset()
-        self.seconds = []
-
-    def step_record(self, *args: Any, **kwargs: Any) -> Any:
-        start = time.process_time()
-        out = self.controller.step_record(*args, **kwargs)
-        self.seconds.append(time.process_time() - start)
-        return out
-
-
-class DepthOf:
-    """The depth image of a scenario's robot: its fault placed (a box), then the render."""
-
-    def __init__(self, faulty: Any) -> None:
-        self.faulty = faulty
-        self.robot = faulty.robot if hasattr(faulty, "robot") else faulty
-
-    def joint_positions(self) -> np.ndarray:
-        return self.faulty.joint_positions()
-
-    def send_joint_velocities(self, q_dot: np.ndarray, dt: float) -> None:
-        self.faulty.send_joint_velocities(q_dot, dt)
-
-    def capture(self) -> np.ndarray:
-        if self.faulty is not self.robot:
-            self.faulty._spoil(self.faulty._captures)  # places, moves or removes the box
-            self.faulty._captures += 1
-        return self.robot.capture_depth()
-
-    def stop(self) -> None:
-        self.faulty.stop()
-
-    def time(self) -> float:
-        return self.faulty.time()
-
-
-def controller_for(label: str, reference: Any, depth: np.ndarray, robot: Any) -> Any:
-    if label == SPECTRAL:
-        return servo_lib.SpectralServo(reference, servo_lib.ServoParams())
-    import peer_servos
-
-    if label == "dense depth":
-        return peer_servos.DenseDepthServo(depth, robot.params.camera.intrinsics)
-    params = peer_servos.RegistrationServoParams(method="fpfh" if label == "FPFH-PBVS" else "icp")
-    return peer_servos.RegistrationServo(reference, params)
 
 
 def run_one(
@@ -144,10 +88,12 @@ def run_one(
 ) -> dict[str, Any]:
     """One run of ``label`` through ``scenario`` from ``q``: its record."""
     reference, depth, T_reference = refs
-    controller = CpuTimed(controller_for(label, reference, depth, robot))
+    factory, uses_depth = servo_peers.CONTROLLERS[label]
+    controller = CpuTimed(factory(reference, depth, robot.params.camera.intrinsics))
     robot.reset_joint_positions(q)
     faulty = scenario.wrap(robot)
-    driven: Any = DepthOf(faulty) if label == "dense depth" else faulty
+    # The dense depth servo sees the depth image, with the scenario's box in it.
+    driven: Any = peer_servos.DepthImageRobot(faulty) if uses_depth else faulty
     log = servo_lib.run_servo(
         driven,
         robot.kinematics,

@@ -174,3 +174,17 @@ def test_latency_wrapper_delivers_the_frame_of_periods_ago():
 def test_servo_params_bound_occlusion_max_share():
     with pytest.raises(ValueError, match=r"occlusion_max_share must be in \[0, 1\]"):
         ServoParams(occlusion_max_share=1.5)
+
+
+def test_a_box_is_in_the_depth_image_too():
+    """FaultyCamera.capture_depth: the depth-image peer sees the scenario's box (its face
+    0.19 m from the camera, the table beyond 0.4 m); a fault that spoils the point cloud
+    itself has no depth-image form."""
+    with sim.PyBulletRobot() as robot:
+        clear = np.nanmin(robot.capture_depth())
+        boxed = faults.HandOccluder(robot, 0.0, 1.0, distance=0.25, size=0.12)
+        depth = boxed.capture_depth()
+        boxed.remove()
+        assert clear > 0.4 and abs(np.nanmin(depth) - 0.19) < 0.01
+        with pytest.raises(ValueError, match="DroppedFrames spoils point clouds"):
+            faults.DroppedFrames(robot, [0]).capture_depth()

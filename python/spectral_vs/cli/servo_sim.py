@@ -285,33 +285,28 @@ def _run_summary(
     t: float,
     r: float,
 ) -> dict[str, Any]:
-    """The JSON entry of one start: its distance, final error, steps, reason, success and
-    step times."""
-    from spectral_vs.poses import pose_error
-    from spectral_vs.sim.scenarios import excursion
+    """The JSON entry of one start: its distance, final error, steps, reason, success,
+    worst excursion, held steps and step times."""
+    from spectral_vs.sim.scenarios import summarize
 
-    final_pose = robot.camera_pose()
-    final_t, final_r = pose_error(np.linalg.inv(final_pose) @ T_world_reference)
-    worst_mm, worst_deg = excursion(log, T_world_reference, final_pose)
+    run = summarize(log, T_world_reference, robot.camera_pose())
     return {
         "index": index,
         "start_mm": 1000 * t,
         "start_deg": float(np.degrees(r)),
-        "final_mm": 1000 * final_t,
-        "final_deg": float(np.degrees(final_r)),
-        "steps": len(log.records),
-        "reason": log.reason,
-        "success": bool(
-            1000 * final_t < MAX_SERVO_ERROR_MM and np.degrees(final_r) < MAX_SERVO_ERROR_DEG
-        ),
+        "final_mm": run.final_mm,
+        "final_deg": run.final_deg,
+        "steps": run.steps,
+        "reason": run.reason,
+        "success": bool(run.final_mm < MAX_SERVO_ERROR_MM and run.final_deg < MAX_SERVO_ERROR_DEG),
         "servo_step_ms_median": 1000 * float(np.median(log.array("seconds"))),
         "servo_step_cpu_ms": [round(1000 * float(ms), 3) for ms in log.array("cpu_seconds")],
         "wall_s": log.wall_seconds,
-        "worst_excursion_mm": worst_mm,
-        "worst_excursion_deg": worst_deg,
-        "held_steps": int(sum(bool(r.hold) for r in log.records)),
-        "recovery_steps": int(sum(bool(r.recovery) for r in log.records)),
-        "relocalizations": int(sum(r.relocalized for r in log.records)),
+        "worst_excursion_mm": run.worst_excursion_mm,
+        "worst_excursion_deg": run.worst_excursion_deg,
+        "held_steps": run.held_steps,
+        "recovery_steps": int(sum(bool(record.recovery) for record in log.records)),
+        "relocalizations": int(sum(record.relocalized for record in log.records)),
     }
 
 

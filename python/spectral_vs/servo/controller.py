@@ -16,10 +16,8 @@ from spectral_vs._core import (
     PointCloud,
     ViewAlignParams,
 )
-from spectral_vs.interop import is_open3d_cloud
 from spectral_vs.poses import pose_error
 from spectral_vs.registration import CloudLike, as_cloud
-from spectral_vs.sanity import check_normal_columns
 from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
 from spectral_vs.servo.law import _rigid_inverse
 from spectral_vs.servo.plane_turn import _PlaneTurn, dominant_plane
@@ -32,25 +30,6 @@ from spectral_vs.servo.records import (
 from spectral_vs.servo.relocalization import Relocalization
 from spectral_vs.servo.scale import resolve_scale
 from spectral_vs.servo.settings import ServoParams
-
-#: Rows of an (N, 6) capture whose normal columns are checked at each step (evenly strided).
-_CHECKED_ROWS = 4096
-
-
-def _finite_cloud(current: CloudLike) -> PointCloud:
-    """``current`` as a cloud without its non-finite rows: a depth sensor's invalid
-    returns are dropped at each step, never raised on."""
-    if isinstance(current, PointCloud) or is_open3d_cloud(current):
-        return as_cloud(current, "current")
-    array = np.asarray(current)
-    if not (array.ndim == 2 and array.shape[1] in (3, 6) and array.dtype.kind in "fiu"):
-        return as_cloud(array, "current")  # its error names the shape
-    if array.shape[1] == 3:
-        return PointCloud(array, drop_non_finite=True)
-    # Colours for normals are told from a sample as well as from every row.
-    sample = array[:: max(1, len(array) // _CHECKED_ROWS)]
-    check_normal_columns(sample[np.isfinite(sample).all(axis=1), 3:], "current")
-    return PointCloud(array[:, :3], array[:, 3:], drop_non_finite=True)
 
 
 def _check_points(reference: PointCloud, min_points: int) -> None:
@@ -282,7 +261,8 @@ class SpectralServo(SensorFaults, Relocalization):
         start = time.perf_counter()
         now = self._clock(now)
         motion = self._carry(T_previous_current)
-        raw = _finite_cloud(current)
+        # A sensor's invalid returns are dropped at each step, never raised on.
+        raw = as_cloud(current, "current", drop_non_finite=True)
         cloud = self._crop(raw)
         record = _empty_record(self._steps, len(cloud))
         self._steps += 1

@@ -101,6 +101,18 @@ class FaultyCamera:
         self.faults.append(index)
         return cloud
 
+    def capture_depth(self) -> np.ndarray:
+        """The robot's depth image (``capture_depth()`` of a
+        :class:`~spectral_vs.sim.PyBulletRobot`), counted as a capture, with the fault's
+        change of the scene in it (:class:`HandOccluder`'s box). A fault that spoils the
+        point cloud itself has no depth-image form here (ValueError)."""
+        index = self._captures
+        self._captures += 1
+        if self._spoil(index) is not None:
+            raise ValueError(f"{type(self).__name__} spoils point clouds: no depth image form")
+        robot: Any = self.robot  # a PyBulletRobot, or another wrapper of one
+        return robot.capture_depth()
+
     def stop(self) -> None:
         self.robot.stop()
 
