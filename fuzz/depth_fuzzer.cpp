@@ -1,6 +1,7 @@
 // cloud_from_depth on random depth images: raw (uint16, any scale) or floating (float or
 // double, with NaN, infinities and negative depths), any size up to 48 x 48, a camera
-// matrix that may not be one, and random settings. Either the call refuses the input with
+// matrix that may not be one, and random settings (the integer ones over int's whole
+// range). Either the call refuses the input with
 // std::invalid_argument, or the cloud keeps what depth_image.hpp promises: finite points
 // inside the depth range, unit normals toward the camera, no more points than lattice
 // pixels, and the organized call agrees with it point for point.
@@ -39,12 +40,29 @@ Eigen::Matrix3d random_camera(FuzzedDataProvider& in) {
   return K;
 }
 
+// An integer setting: mostly small (where the stencils work), else anywhere in int's
+// range or at one of its edges (where 2 * normal_step and h + stride - 1 overflowed, and
+// window = 2^16 + 1 took 33 s).
+int integer_setting(FuzzedDataProvider& in, int small_max) {
+  switch (in.ConsumeIntegralInRange(0, 3)) {
+    case 0:
+      return in.ConsumeIntegral<int>();
+    case 1: {
+      const int edges[] = {std::numeric_limits<int>::min(), -1, (1 << 16) + 1, 1 << 30,
+                           std::numeric_limits<int>::max()};
+      return edges[in.ConsumeIntegralInRange(0, 4)];
+    }
+    default:
+      return in.ConsumeIntegralInRange(0, small_max);
+  }
+}
+
 DepthCloudParams random_params(FuzzedDataProvider& in) {
   DepthCloudParams p;
-  p.normal_step = in.ConsumeIntegralInRange(0, 4);
-  p.window = in.ConsumeIntegralInRange(0, 7);
+  p.normal_step = integer_setting(in, 4);
+  p.window = integer_setting(in, 7);
   p.max_depth_jump = in.ConsumeFloatingPointInRange(-0.1, 0.5);
-  p.stride = in.ConsumeIntegralInRange(0, 4);
+  p.stride = integer_setting(in, 4);
   if (in.ConsumeBool()) p.depth_scale = in.ConsumeFloatingPointInRange(-10.0, 10000.0);
   p.min_depth = in.ConsumeFloatingPointInRange(-1.0, 2.0);
   p.max_depth = in.ConsumeBool() ? std::numeric_limits<double>::infinity()

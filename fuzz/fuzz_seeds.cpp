@@ -1,10 +1,12 @@
-// Writes the fuzzers' seed corpora into OUT/{pcd,ply,urdf,align,depth}:
+// Writes the fuzzers' seed corpora into OUT/{pcd,pcd_ascii,ply,urdf,align,depth}:
 //   fuzz_seeds OUT DATA_DIR [URDF:BASE:TIP ...]
 // PCD: small clouds (with and without normals) in each encoding, an organized ASCII
 // cloud with NaN pixels, and for every scan in DATA_DIR its first 4 KB as they are plus
 // its first 150 points re-saved in each encoding. PLY: small clouds binary (as
 // save_cloud writes them), ASCII and big-endian by hand. URDF: "BASE\nTIP\n" and the XML
-// of each given file. align and depth: random byte strings.
+// of each given file, and two nestings (the target's byte-1 mode). pcd_ascii: a type
+// byte and a value, for the values PCL misreads and their neighbours. align and depth:
+// random byte strings.
 
 #include <spectral_vs/representation/cloud_io.hpp>
 
@@ -66,8 +68,19 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path out = argv[1], data = argv[2];
-  for (const char* name : {"pcd", "ply", "urdf", "align", "depth"})
+  for (const char* name : {"pcd", "pcd_ascii", "ply", "urdf", "align", "depth"})
     fs::create_directories(out / name);
+
+  // pcd_ascii: the type index (F4 F8 I1 I2 I4 I8 U1 U2 U4 U8) and the value.
+  const char* values[] = {"1.5",   "-.25", "0x1p3", "1e39",  "5e",    "1e3",
+                          ".5",    "inf",  "nan",   "70000", "-1",    "300",
+                          "65535", "-0",   "010",   "+7",    "1e-50", "9007199254740993"};
+  int seed = 0;
+  for (char type = 0; type < 10; ++type) {
+    for (const char* value : values) {
+      write(out / "pcd_ascii" / ("value_" + std::to_string(seed++)), std::string(1, type) + value);
+    }
+  }
 
   // PCD
   save_pcds(out / "pcd", "normals", small_cloud(40, true, 1));
@@ -145,6 +158,10 @@ int main(int argc, char** argv) {
                fs::path(path).stem().string() + "_" + tip + ".txt"),
           base + "\n" + tip + "\n" + xml.str());
   }
+
+  // URDF nestings: byte 1, the depth / 4 in two bytes, the element
+  write(out / "urdf" / "nested_shallow.bin", std::string("\x01\x10\x00visual", 9));
+  write(out / "urdf" / "nested_deep.bin", std::string("\x01\x50\xc3origin", 9));
 
   // align: random bytes of a few lengths
   std::mt19937 rng(17);

@@ -29,10 +29,10 @@ if [ -n "$bullet" ]; then
 fi
 "$build/fuzz/fuzz_seeds" "$build/seeds" "$data" "${urdfs[@]}" || exit 1
 
-declare -A max_len=([pcd_fuzzer]=16384 [ply_fuzzer]=16384 [urdf_fuzzer]=32768 [align_fuzzer]=2048 [depth_fuzzer]=20000)
-declare -A seeds=([pcd_fuzzer]=pcd [ply_fuzzer]=ply [urdf_fuzzer]=urdf [align_fuzzer]=align [depth_fuzzer]=depth)
+declare -A max_len=([pcd_fuzzer]=16384 [pcd_ascii_fuzzer]=80 [ply_fuzzer]=16384 [urdf_fuzzer]=32768 [align_fuzzer]=2048 [depth_fuzzer]=20000)
+declare -A seeds=([pcd_fuzzer]=pcd [pcd_ascii_fuzzer]=pcd_ascii [ply_fuzzer]=ply [urdf_fuzzer]=urdf [align_fuzzer]=align [depth_fuzzer]=depth)
 failed=()
-for name in pcd_fuzzer ply_fuzzer urdf_fuzzer align_fuzzer depth_fuzzer; do
+for name in pcd_fuzzer pcd_ascii_fuzzer ply_fuzzer urdf_fuzzer align_fuzzer depth_fuzzer; do
   corpus="$build/corpus/$name"
   artifacts="$build/artifacts/$name"
   mkdir -p "$corpus" "$artifacts"

@@ -2,6 +2,9 @@
 // by the URDF's XML (the seeds: the test arm and the simulation's robots). A bad URDF or
 // chain is std::invalid_argument; a chain that is built gives finite poses, Jacobians
 // and joint velocities within its limits at its joints' middle (or zero) positions.
+// An input that begins with byte 1 is a nesting instead: its next two bytes give a depth
+// up to 2^18 (a mutated file cannot reach such depths within max_len; 100,000 levels
+// overflowed the XML parser's stack), its rest the element's name and what it wraps.
 
 #include <spectral_vs/kinematics/kinematics.hpp>
 
@@ -11,9 +14,28 @@
 #include <stdexcept>
 #include <string>
 
+namespace {
+
+// "base\ntip\n" and a robot whose first link holds an element nested `depth` levels.
+std::string nested_urdf(const uint8_t* data, size_t size) {
+  const int depth = 4 * (data[1] | (data[2] << 8));
+  const std::string rest(reinterpret_cast<const char*>(data) + 3, size - 3);
+  const std::string name = rest.empty() ? "visual" : rest.substr(0, rest.find_first_of("<>/ ="));
+  std::string xml = "base\ntip\n<robot name=\"r\"><link name=\"base\">";
+  xml.reserve(xml.size() + std::size_t(depth) * (2 * name.size() + 5) + rest.size() + 64);
+  for (int i = 0; i < depth; ++i) xml += "<" + name + ">";
+  xml += rest;
+  for (int i = 0; i < depth; ++i) xml += "</" + name + ">";
+  return xml + "</link></robot>";
+}
+
+}  // namespace
+
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace spectral_vs;
-  const std::string text(reinterpret_cast<const char*>(data), size);
+  const std::string text = size >= 3 && data[0] == 1
+                               ? nested_urdf(data, size)
+                               : std::string(reinterpret_cast<const char*>(data), size);
   const auto first = text.find('\n');
   if (first == std::string::npos) return 0;
   const auto second = text.find('\n', first + 1);

@@ -121,6 +121,14 @@ const char* kHeader =
     "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
     "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n";
 
+// An ASCII PLY of 3 vertices on a 2 x 2 lattice whose range_grid lines are `grid`.
+std::string organized_ply(const std::string& grid) {
+  return "ply\nformat ascii 1.0\nobj_info num_cols 2\nobj_info num_rows 2\nelement vertex 3\n"
+         "property float x\nproperty float y\nproperty float z\nelement range_grid 4\n"
+         "property list uchar int vertex_indices\nend_header\n0 0 1\n0.1 0 1\n0 0.1 1\n" +
+         grid;
+}
+
 std::string urdf_text() { return read_bytes(SPECTRAL_VS_TEST_URDF); }
 
 std::string replaced(std::string text, const std::string& from, const std::string& to) {
@@ -243,7 +251,27 @@ std::vector<Case> cases() {
        "is truncated: 0 of 2 points"},
       {"load_ascii_words",
        [] { load_cloud(write_file("words.pcd", std::string(kHeader) + "a b c\n1 2 3\n")); },
-       "is not a number"},
+       "is not a decimal number"},
+      // PCL reads a prefix of an ASCII value it cannot parse and wraps one out of range.
+      {"load_ascii_hexadecimal_float",
+       [] { load_cloud(write_file("hex.pcd", std::string(kHeader) + "0x1p3 2 3\n1 2 3\n")); },
+       "line 11: point 0, field 'x' (TYPE F SIZE 4): '0x1p3' is not a decimal number"},
+      {"load_ascii_exponent_in_integer_field",
+       [] {
+         const std::string header = replaced(kHeader, "TYPE F F F", "TYPE I F F");
+         load_cloud(write_file("exponent.pcd", header + "1e3 2 3\n1 2 3\n"));
+       },
+       "'1e3' is not an integer"},
+      {"load_ascii_unsigned_overflow",
+       [] {
+         const std::string header =
+             replaced(replaced(kHeader, "TYPE F F F", "TYPE U F F"), "SIZE 4 4 4", "SIZE 2 4 4");
+         load_cloud(write_file("wrap.pcd", header + "1 2 3\n70000 2 3\n"));
+       },
+       "'70000' is outside [0, 65535] of a 2-byte unsigned integer"},
+      {"load_ascii_white_space_line",
+       [] { load_cloud(write_file("blank.pcd", std::string(kHeader) + "1 2 3\n \n1 2 3\n")); },
+       "line 12: point 1 has 0 values"},
       {"load_ascii_short_line",
        [] { load_cloud(write_file("short.pcd", std::string(kHeader) + "1 2\n1 2 3\n")); },
        "has 2 values"},
@@ -257,7 +285,7 @@ std::vector<Case> cases() {
          }
        },
        "'?"
-       "?' that is not a number"},  // split: "??'" would be a trigraph
+       "?' is not a decimal number"},  // split: "??'" would be a trigraph
       // Found by fuzz/pcd_fuzzer: PCL's header reader reads on past DATA and took binary
       // data spelling "COLUMNS" for a FIELDS line, then crashed reading the data.
       {"load_binary_data_spelling_a_header_line",
@@ -384,6 +412,35 @@ std::vector<Case> cases() {
                                                 "property uchar alpha\nend_header\n0 0 0 1\n"));
        },
        "vertex colours must be"},
+      // PCL copies a cell's point from the vertex its range_grid list names, unchecked:
+      // -1 read before its buffer (SIGSEGV, found by fuzz/ply_fuzzer).
+      {"load_ply_range_grid_negative_index",
+       [] { load_cloud(write_file("grid_negative.ply", organized_ply("1 0\n1 -1\n0\n1 2\n"))); },
+       "range_grid cell 1 names vertex '-1', not one of the 3 vertices"},
+      {"load_ply_range_grid_index_past_the_vertices",
+       [] { load_cloud(write_file("grid_past.ply", organized_ply("1 0\n1 1\n0\n1 3\n"))); },
+       "range_grid cell 3 names vertex '3', not one of the 3 vertices"},
+      {"load_ply_binary_range_grid_index_past_the_vertices",
+       [] {
+         std::string body;
+         const auto put_int = [&body](std::int32_t value) {  // big-endian
+           for (int shift = 24; shift >= 0; shift -= 8)
+             body.push_back(char((value >> shift) & 0xff));
+         };
+         for (int v = 0; v < 3; ++v) {
+           for (int k = 0; k < 3; ++k) put_int(0);  // float zeros
+         }
+         body += '\x01';
+         put_int(7);
+         body += std::string(3, '\x00');  // three empty cells
+         load_cloud(write_file("grid_binary.ply",
+                               "ply\nformat binary_big_endian 1.0\nobj_info num_cols 2\n"
+                               "obj_info num_rows 2\nelement vertex 3\nproperty float x\n"
+                               "property float y\nproperty float z\nelement range_grid 4\n"
+                               "property list uchar int vertex_indices\nend_header\n" +
+                                   body));
+       },
+       "range_grid cell 0 names vertex '7', not one of the 3 vertices"},
       {"load_ply_small_obj_info",
        [] {
          load_cloud(write_file("obj_info.ply", std::string(kPlyHead) +

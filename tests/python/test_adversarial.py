@@ -394,13 +394,13 @@ CASES = [
         "load/words for numbers",  # PCL read them as zeros
         lambda f: svs.load_cloud(f.path("words.pcd")),
         ValueError,
-        "'a' that is not a number",
+        "'a' is not a decimal number",
     ),
     Case(
         "load/invalid UTF-8",  # the message was not decodable: UnicodeDecodeError
         lambda f: svs.load_cloud(f.path("invalid_utf8.pcd")),
         ValueError,
-        r"'\?\?' that is not a number",
+        r"'\?\?' is not a decimal number",
     ),
     Case(
         "load/only NaN",
@@ -1332,6 +1332,29 @@ def test_a_ply_with_an_indented_header_line_is_refused(tmp_path):
         svs.load_cloud(str(path))
     path.write_bytes(b"ply\nformat ascii 1.0\nobj_info num_rows 1\n" + body)
     assert len(svs.load_cloud(str(path))) == 1
+
+
+@pytest.mark.parametrize("index, refused", [("-1", True), ("3", True), ("1.5", True), ("2", False)])
+def test_a_ply_range_grid_naming_no_vertex_is_refused(tmp_path, index, refused):
+    """PCL's PLY reader copies each cell of an organized cloud from the vertex its
+    range_grid list names, unchecked: -1 read before its buffer and killed the process
+    (SIGSEGV, found by fuzz/ply_fuzzer)."""
+    path = tmp_path / "organized.ply"
+    path.write_text(
+        "ply\nformat ascii 1.0\nobj_info num_cols 2\nobj_info num_rows 2\nelement vertex 3\n"
+        "property float x\nproperty float y\nproperty float z\nelement range_grid 4\n"
+        "property list uchar int vertex_indices\nend_header\n0 0 1\n0.1 0 1\n0 0.1 1\n"
+        f"1 0\n1 1\n0\n1 {index}\n"
+    )
+    if refused:
+        with pytest.raises(ValueError, match=f"range_grid cell 3 names vertex '{index}'"):
+            svs.load_cloud(path)
+    else:
+        np.testing.assert_allclose(
+            np.asarray(svs.load_cloud(path).points),
+            [[0, 0, 1], [0.1, 0, 1], [0, 0.1, 1]],
+            atol=1e-7,
+        )
 
 
 def test_a_large_depth_frame_leaves_no_large_scratch_behind():

@@ -1,6 +1,7 @@
 #include <spectral_vs/representation/cloud_io.hpp>
 
 #include "common/checks.hpp"
+#include "representation/pcd_ascii.hpp"
 
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/io/pcd_io.h>
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cctype>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -85,14 +87,6 @@ long long parse_count(const std::string& token) {
   return std::stoll(token);
 }
 
-// A number of an ASCII data line as PCL reads it: decimal, nan or inf, nothing else.
-bool is_number(const std::string& token) {
-  const char* begin = token.c_str();
-  char* end = nullptr;
-  std::strtod(begin, &end);
-  return end != begin && *end == '\0';
-}
-
 // The bytes of `file` after its read position, which it keeps.
 long long bytes_left(std::ifstream& file) {
   const std::streampos at = file.tellg();
@@ -130,6 +124,14 @@ void check_after_data_line(std::ifstream& file, const Bad& bad) {
   file.seekg(data_start);
 }
 
+// A value of an ASCII point: its field's name and type.
+struct AsciiValue {
+  const std::string* field;
+  detail::PcdValueType type;
+};
+// Values per ASCII point (a line of over a million values is no point cloud).
+constexpr long long kMaxAsciiValues = 1 << 20;
+
 // PCL's PCD reader trusts the header: a header that does not match the data can make it
 // read past its buffers (a crash) or return zeros for unparsable ASCII values. So the
 // whole structure is checked here first: field sizes and types, WIDTH x HEIGHT = POINTS,
@@ -146,8 +148,9 @@ void check_pcd(const std::string& path) {
   std::string data;
   bool versioned = false;
   std::string line;
-  for (int lines = 0; data.empty(); ++lines) {
-    if (lines == 256 || !std::getline(file, line)) {
+  long long line_number = 0;  // of the last line read, from 1
+  for (; data.empty(); ++line_number) {
+    if (line_number == 256 || !std::getline(file, line)) {
       if (!versioned && fields.empty()) {
         fail("path: ", path, " is not a PCD file (no VERSION or FIELDS header line)");
       }
@@ -165,8 +168,11 @@ void check_pcd(const std::string& path) {
     if (key == "VERSION") {
       versioned = true;
     } else if (key == "VIEWPOINT") {
-      if (values.size() != 7 || !std::all_of(values.begin(), values.end(), is_number)) {
-        bad("VIEWPOINT must be 7 numbers, got ", in_quotes(line));
+      const auto is_float = [](const std::string& value) {
+        return !detail::ascii_value_problem(value, {'F', 4});
+      };
+      if (values.size() != 7 || !std::all_of(values.begin(), values.end(), is_float)) {
+        bad("VIEWPOINT must be 7 decimal numbers, got ", in_quotes(line));
       }
     } else if (key == "FIELDS" || key == "COLUMNS") {
       fields = values;
@@ -201,6 +207,7 @@ void check_pcd(const std::string& path) {
         counts.size(), " COUNT entries");
   }
   long long point_step = 0, values_per_point = 0;
+  std::vector<AsciiValue> ascii_values;  // of a point, field by field
   for (std::size_t i = 0; i < fields.size(); ++i) {
     const long long size = parse_count(sizes[i]);
     const long long count = parse_count(counts[i]);
@@ -215,6 +222,10 @@ void check_pcd(const std::string& path) {
       bad("field ", in_quotes(fields[i]), " has COUNT ", in_quotes(counts[i]));
     point_step += size * count;
     values_per_point += count;
+    if (data == "ascii" && values_per_point <= kMaxAsciiValues) {
+      ascii_values.insert(ascii_values.end(), std::size_t(count),
+                          AsciiValue{&fields[i], {type[0], int(size)}});
+    }
   }
   if (width < 0 || points < 0) bad("no WIDTH or no POINTS");
   if (width * height != points)
@@ -248,19 +259,28 @@ void check_pcd(const std::string& path) {
   } else if (data == "ascii") {
     file.clear();
     file.seekg(header_end);
+    if (values_per_point > kMaxAsciiValues) {
+      bad(values_per_point, " values per point, over the ", kMaxAsciiValues,
+          " an ASCII line may hold");
+    }
     long long read = 0;
     while (read < points && std::getline(file, line)) {
-      for (char& c : line) {
-        if (c == ',') c = ' ';
-      }
+      ++line_number;
+      // PCL skips only a line with no byte: one of white space is a point of no values.
+      if (line.empty()) continue;
       const std::vector<std::string> tokens = split(line);
-      if (tokens.empty()) continue;
       if (static_cast<long long>(tokens.size()) != values_per_point) {
-        bad("point ", read, " has ", tokens.size(), " values, the header gives ", values_per_point);
+        bad("line ", line_number, ": point ", read, " has ", tokens.size(),
+            " values, the header gives ", values_per_point);
       }
-      for (const auto& token : tokens) {
-        if (!is_number(token))
-          bad("point ", read, " has a value ", in_quotes(token), " that is not a number");
+      for (std::size_t v = 0; v < tokens.size(); ++v) {
+        const AsciiValue& value = ascii_values[v];
+        if (*value.field == "_") continue;  // padding, which PCL skips
+        if (const auto problem = detail::ascii_value_problem(tokens[v], value.type)) {
+          bad("line ", line_number, ": point ", read, ", field ", in_quotes(*value.field),
+              " (TYPE ", value.type.type, " SIZE ", value.type.size, "): ", in_quotes(tokens[v]),
+              " ", *problem);
+        }
       }
       ++read;
     }
@@ -283,9 +303,10 @@ int ply_type_size(const std::string& type) {
 }
 
 struct PlyProperty {
-  std::string name, type;
+  std::string name, type;  // a list's type is its items'
   bool list = false;
-  int bytes = 0;  // a scalar's size, or a list's count size
+  int bytes = 0;           // a scalar's size, or a list's count size
+  std::string count_type;  // a list's
 };
 
 // What a PLY header says of the points: the vertex count and, for an organized cloud, the
@@ -335,6 +356,7 @@ PlyProperty parse_ply_property(const std::vector<std::string>& tokens, const std
   property.list = tokens.size() == 5 && tokens[1] == "list";
   if (property.list) {
     property.bytes = ply_type_size(tokens[2]);
+    property.count_type = tokens[2];
     property.type = tokens[3];
     property.name = tokens[4];
     if (property.bytes == 0 || ply_type_size(tokens[3]) == 0) {
@@ -350,6 +372,114 @@ PlyProperty parse_ply_property(const std::vector<std::string>& tokens, const std
         in_quotes(line));
   }
   return property;
+}
+
+// A binary PLY scalar of `type` at `at`, in the file's byte order, as a double.
+double ply_scalar(const char* at, const std::string& type, bool big_endian) {
+  const int size = ply_type_size(type);
+  unsigned char bytes[8];
+  std::memcpy(bytes, at, std::size_t(size));
+  if (big_endian) std::reverse(bytes, bytes + size);
+  const auto as = [&bytes](auto typed) {
+    std::memcpy(&typed, bytes, sizeof(typed));
+    return static_cast<double>(typed);
+  };
+  if (type == "char" || type == "int8") return as(std::int8_t{});
+  if (type == "uchar" || type == "uint8") return as(std::uint8_t{});
+  if (type == "short" || type == "int16") return as(std::int16_t{});
+  if (type == "ushort" || type == "uint16") return as(std::uint16_t{});
+  if (type == "int" || type == "int32") return as(std::int32_t{});
+  if (type == "uint" || type == "uint32") return as(std::uint32_t{});
+  if (type == "float" || type == "float32") return as(float{});
+  return as(double{});
+}
+
+// The values of one element instance, property by property (a list as its items), read
+// from an ASCII line or from binary data; false when the data ends first.
+class PlyInstanceReader {
+ public:
+  PlyInstanceReader(std::ifstream& file, bool ascii, bool big_endian)
+      : file_(file), ascii_(ascii), big_endian_(big_endian) {}
+
+  // Calls `item(property, value text or "", value)` for each list item of the instance.
+  template <class Item>
+  bool read(const std::vector<PlyProperty>& properties, const Item& item) {
+    if (ascii_) return read_ascii(properties, item);
+    for (const PlyProperty& property : properties) {
+      char buffer[8];
+      if (!file_.read(buffer, property.bytes)) return false;
+      if (!property.list) continue;
+      const double count = ply_scalar(buffer, property.count_type, big_endian_);
+      if (!(count >= 0 && count < 2147483648.0)) return false;
+      const int size = ply_type_size(property.type);
+      for (long long k = 0; k < static_cast<long long>(count); ++k) {
+        if (!file_.read(buffer, size)) return false;
+        item(property, std::string(), ply_scalar(buffer, property.type, big_endian_));
+      }
+    }
+    return true;
+  }
+
+ private:
+  template <class Item>
+  bool read_ascii(const std::vector<PlyProperty>& properties, const Item& item) {
+    std::string line;
+    if (!std::getline(file_, line)) return false;
+    const std::vector<std::string> tokens = split(line);
+    std::size_t at = 0;
+    for (const PlyProperty& property : properties) {
+      if (at >= tokens.size()) return false;
+      if (!property.list) {
+        ++at;
+        continue;
+      }
+      const long long count = parse_count(tokens[at++]);
+      if (count < 0 || count > static_cast<long long>(tokens.size() - at)) return false;
+      for (long long k = 0; k < count; ++k, ++at) item(property, tokens[at], 0.0);
+    }
+    return true;
+  }
+
+  std::ifstream& file_;
+  bool ascii_, big_endian_;
+};
+
+// PCL's PLY reader fills an organized cloud's cell from the vertex that the cell's
+// range_grid list names first, without checking it: an index of -1 or past the vertices
+// read outside its buffer (a crash, found by fuzz/ply_fuzzer). Every index is checked
+// here, walking the elements before range_grid as PCL does (an ASCII instance per line).
+template <class Bad>
+void check_ply_range_grid(std::ifstream& file, const std::vector<PlyElement>& elements,
+                          const std::string& format, long long vertices, const Bad& bad) {
+  const std::streampos data_start = file.tellg();
+  PlyInstanceReader reader(file, format == "ascii", format == "binary_big_endian");
+  for (const PlyElement& element : elements) {
+    const bool grid = element.name == "range_grid";
+    for (long long i = 0; i < element.count; ++i) {
+      const auto check_index = [&](const PlyProperty&, const std::string& text, double value) {
+        if (!grid) return;
+        if (!text.empty()) {
+          char* end = nullptr;
+          value = std::strtod(text.c_str(), &end);
+          if (*end != '\0') value = -1.0;
+        }
+        if (!(value >= 0 && value < double(vertices) && value == std::floor(value))) {
+          std::ostringstream name;
+          name << value;
+          bad("range_grid cell ", i, " names vertex ", in_quotes(text.empty() ? name.str() : text),
+              ", not one of the ", vertices, " vertices");
+        }
+      };
+      if (!reader.read(element.properties, check_index)) {
+        file.clear();
+        file.seekg(data_start);
+        return;  // data that ends early or does not parse: PCL's reader refuses it
+      }
+    }
+    if (grid) break;
+  }
+  file.clear();
+  file.seekg(data_start);
 }
 
 // PCL's PLY reader asserts (aborts the process) on several headers that do not match
@@ -467,6 +597,7 @@ PlyLayout check_ply(const std::string& path) {
   }
   const auto grid = std::find_if(elements.begin(), elements.end(),
                                  [](const PlyElement& e) { return e.name == "range_grid"; });
+  if (grid != elements.end()) check_ply_range_grid(file, elements, format, vertex->count, bad);
   return {vertex->count, grid == elements.end() ? -1 : grid->count};
 }
 
