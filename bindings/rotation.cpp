@@ -298,13 +298,13 @@ list of numpy.ndarray
   m.def(
       "wigner_generators",
       [](int lmax) {
-        const WignerGenerators& g = wigner_generators(lmax);
+        const WignerGenerators g = wigner_generators(lmax);
         return py::make_tuple(matrix_list(g.x), matrix_list(g.y), matrix_list(g.z));
       },
       py::arg("lmax"), R"doc(
 Generators u^l(e_k) = d/de U^l(exp(e hat(e_k))) at e = 0, for k = x, y, z.
 
-Constant, antisymmetric, at most two non-zeros per row; cached per lmax.
+Constant, antisymmetric, at most two non-zeros per row; built at each call.
 
 Returns
 -------

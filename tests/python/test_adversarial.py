@@ -1361,15 +1361,31 @@ def test_a_large_depth_frame_leaves_no_large_scratch_behind():
     """One 3000 x 3000 frame kept about 700 MB of per-thread scratch resident after the call;
     buffers over 64 MB are now released: the resident memory grows by less than 150 MB
     (the cloud itself, 9 M points with normals, is 430 MB and is freed with it)."""
-
-    def resident_mb() -> float:
-        with open("/proc/self/statm") as statm:
-            return int(statm.read().split()[1]) * 4096 / 2**20
-
     depth = np.full((3000, 3000), 1.0, np.float32)
     K = np.array([[1500.0, 0.0, 1500.0], [0.0, 1500.0, 1500.0], [0.0, 0.0, 1.0]])
-    before = resident_mb()
+    before = resident_megabytes()
     cloud = svs.cloud_from_depth(depth, K)
     assert len(cloud) > 8_000_000
     del cloud
-    assert resident_mb() - before < 150.0
+    assert resident_megabytes() - before < 150.0
+
+
+def resident_megabytes() -> float:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096 / 2**20
+
+
+def test_every_bandwidth_once_leaves_a_bounded_cache():
+    """Before: the spherical harmonic transforms of every bandwidth, cached for the process,
+    kept 549 MB resident once each had been used, and the Wigner generators of every lmax
+    2.1 GB. Now the transforms' cache keeps 64 MB of the recently used ones and the
+    generators are built at each call: the resident memory grows by less than 200 MB."""
+    before = resident_megabytes()
+    for bandwidth in range(1, 129):
+        grid = np.ones((2 * bandwidth, 2 * bandwidth))
+        coefficients = svs.sh_coefficients(grid, bandwidth)
+        assert coefficients[0] == pytest.approx(math.sqrt(4 * math.pi), rel=1e-9)
+        generators = svs.wigner_generators(bandwidth - 1)
+        assert len(generators[0]) == bandwidth
+    del generators
+    assert resident_megabytes() - before < 200.0

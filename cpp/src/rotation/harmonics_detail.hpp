@@ -3,6 +3,8 @@
 
 #include <spectral_vs/rotation/spherical_harmonics.hpp>
 
+#include <memory>
+
 namespace spectral_vs::detail {
 
 /// S^l_m(x, y, z) for l <= lmax into out[0 .. (lmax+1)^2), for a unit vector.
@@ -17,8 +19,13 @@ void accumulate_real_sh(const double* x, const double* y, const double* z, const
 /// Vectors per call of accumulate_real_sh.
 inline constexpr int kHarmonicsBlock = 32;
 
-/// A transform per bandwidth, built once and shared (construction is mutex-guarded).
-const SphericalHarmonicTransform& cached_transform(int bandwidth);
+/// Bytes of transforms the cache keeps: the largest (B = 128, 17 MB) and the recently used
+/// ones beside it. Every bandwidth cached at once took 549 MB and stayed resident.
+inline constexpr long long kCachedTransformBytes = 64LL << 20;
+
+/// The transform of a bandwidth, built once and kept while it is among the recently used
+/// within kCachedTransformBytes (least recently used dropped first; mutex-guarded).
+std::shared_ptr<const SphericalHarmonicTransform> cached_transform(int bandwidth);
 
 /// Largest degree l any rotation function accepts.
 inline constexpr int kMaxDegree = kMaxBandwidth - 1;

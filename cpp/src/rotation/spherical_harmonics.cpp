@@ -3,8 +3,9 @@
 #include "common/checks.hpp"
 #include "rotation/harmonics_detail.hpp"
 
+#include <algorithm>
 #include <cmath>
-#include <map>
+#include <list>
 #include <memory>
 #include <mutex>
 
@@ -144,14 +145,32 @@ void accumulate_real_sh(const double* x, const double* y, const double* z, const
   }
 }
 
-const SphericalHarmonicTransform& cached_transform(int bandwidth) {
+std::shared_ptr<const SphericalHarmonicTransform> cached_transform(int bandwidth) {
   require_bandwidth(bandwidth);
+  // Bytes of a transform's tables: Legendre B^2 (B + 1), cos and sin 4 B^2, weights 2 B.
+  const auto bytes_of = [](long long B) { return 8 * (B * B * (B + 1) + 4 * B * B + 2 * B); };
+  struct Entry {
+    int bandwidth;
+    std::shared_ptr<const SphericalHarmonicTransform> transform;
+  };
   static std::mutex mutex;
-  static std::map<int, std::unique_ptr<SphericalHarmonicTransform>> cache;
+  static std::list<Entry> cache;  // most recently used last
+  static long long cached_bytes = 0;
   std::lock_guard<std::mutex> lock(mutex);
-  auto& slot = cache[bandwidth];
-  if (!slot) slot = std::make_unique<SphericalHarmonicTransform>(bandwidth);
-  return *slot;
+  const auto hit = std::find_if(cache.begin(), cache.end(),
+                                [bandwidth](const Entry& e) { return e.bandwidth == bandwidth; });
+  if (hit != cache.end()) {
+    cache.splice(cache.end(), cache, hit);
+    return cache.back().transform;
+  }
+  cache.push_back({bandwidth, std::make_shared<const SphericalHarmonicTransform>(bandwidth)});
+  cached_bytes += bytes_of(bandwidth);
+  // Least recently used first; a caller still holding one keeps it alive until done.
+  while (cached_bytes > kCachedTransformBytes && cache.size() > 1) {
+    cached_bytes -= bytes_of(cache.front().bandwidth);
+    cache.pop_front();
+  }
+  return cache.back().transform;
 }
 
 }  // namespace detail
@@ -253,11 +272,11 @@ SphereGrid SphericalHarmonicTransform::inverse(const ShCoefficients& coefficient
 }
 
 ShCoefficients sh_coefficients(const SphereGrid& samples, int bandwidth) {
-  return detail::cached_transform(bandwidth).forward(samples);
+  return detail::cached_transform(bandwidth)->forward(samples);
 }
 
 SphereGrid sh_synthesis(const ShCoefficients& coefficients, int bandwidth) {
-  return detail::cached_transform(bandwidth).inverse(coefficients);
+  return detail::cached_transform(bandwidth)->inverse(coefficients);
 }
 
 }  // namespace spectral_vs

@@ -7,8 +7,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <map>
-#include <memory>
 #include <mutex>
 #include <vector>
 
@@ -230,14 +228,9 @@ WignerMatrices wigner_real(const Eigen::Matrix3d& R, int lmax) {
   return out;
 }
 
-const WignerGenerators& wigner_generators(int lmax) {
+WignerGenerators wigner_generators(int lmax) {
   detail::require_degree(lmax, "lmax");
-  static std::mutex mutex;
-  static std::map<int, std::unique_ptr<WignerGenerators>> cache;
-  std::lock_guard<std::mutex> lock(mutex);
-  auto& slot = cache[lmax];
-  if (!slot) slot = std::make_unique<WignerGenerators>(build_generators(lmax));
-  return *slot;
+  return build_generators(lmax);
 }
 
 void apply_wigner_generator(int axis, const Eigen::Ref<const Eigen::VectorXd>& x,

@@ -34,10 +34,11 @@ struct WignerGenerators {
   std::vector<Eigen::MatrixXd> x, y, z;
 };
 
-/// Generators for degrees 0..lmax, computed once per lmax and cached for the process
-/// (thread-safe; the reference stays valid).
+/// Generators for degrees 0..lmax: 3 sum_l (2l+1)^2 doubles (67 MB at lmax = 127), built
+/// at each call (about the cost of zeroing them; a cache per lmax held 2.1 GB once every
+/// lmax had been asked for).
 /// @throws std::invalid_argument if lmax is outside [0, kMaxBandwidth - 1].
-const WignerGenerators& wigner_generators(int lmax);
+WignerGenerators wigner_generators(int lmax);
 
 /// y = u^l(e_axis) x for one degree l = (x.size() - 1) / 2, axis 0, 1, 2 = x, y, z,
 /// without forming the matrix (O(l)).
