@@ -66,6 +66,7 @@ fuzz: system-deps venv
 	fuzz/run_fuzzers.sh build/fuzz $(FUZZ_SECONDS) $(abspath $(DATA))
 	# The Python harness over whole integer ranges (tests/python/test_properties.py), longer.
 	SPECTRAL_VS_HARNESS_EXAMPLES=2000 SPECTRAL_VS_DATA=$(DATA) $(PY) -m pytest -q -p no:cacheprovider tests/python/test_properties.py -k whole_range
+	SPECTRAL_VS_HARNESS_EXAMPLES=2000 SPECTRAL_VS_DATA=$(DATA) $(PY) -m pytest -q -p no:cacheprovider tests/python/test_api_harness.py
 
 # Installs only the Debian packages that are missing, so a second run is instant.
 system-deps:

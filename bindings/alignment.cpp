@@ -280,7 +280,7 @@ max_seconds : float
     so far is returned with ``converged = False`` and ``stop_reason = 'max_seconds'``.
 max_voxels : int
     Memory cap: any grid over this many voxels is refused with ``ValueError`` before it
-    is allocated (default 2^27; the largest grids take about 28 bytes per voxel).
+    is allocated (default 2^24, about 1 GB for an alignment; at most 2^32).
 )doc");
   define_settings(align_params);
   define_group(align_params, "scene", &AlignParams::scene,

@@ -167,7 +167,10 @@ numpy.ndarray, shape (3,)
 )doc");
 
   m.def(
-      "rotation_angle", [](const py::handle& R) { return log_so3(to_rotation(R, "R")).norm(); },
+      "rotation_angle",
+      [](const py::handle& R) {
+        return rotation_distance(Eigen::Matrix3d::Identity(), to_rotation(R, "R"));
+      },
       py::arg("R"), R"doc(
 The angle of the rotation R, radians in [0, pi]: the geodesic distance of R from the
 identity on SO(3), |so3_log(R)|. The angle between two rotations A and B is

@@ -122,7 +122,7 @@ class GridSpec:
 
 def fft_friendly_size(n: int) -> int: ...
 def make_grid_spec(
-    cloud_a: PointCloud, cloud_b: PointCloud, resolution: float, max_voxels: int = 134217728
+    cloud_a: PointCloud, cloud_b: PointCloud, resolution: float, max_voxels: int = 16777216
 ) -> GridSpec: ...
 
 class VoxelGrid:
@@ -143,7 +143,7 @@ def voxelize(
     cloud: PointCloud,
     spec: GridSpec,
     occupancy: str = "binary",  # "binary", "count" or "trilinear"
-    max_voxels: int = 134217728,
+    max_voxels: int = 16777216,
 ) -> VoxelGrid: ...
 def egi(
     cloud_or_normals: PointCloud | npt.ArrayLike,  # normals: (N, 3)
@@ -251,7 +251,7 @@ class PhaseCorrelation:
         subvoxel: bool = True,
         subvoxel_band: float = 0.25,  # cycles per voxel
         threads: int = 1,
-        max_voxels: int = 134217728,
+        max_voxels: int = 16777216,
     ) -> None: ...
     def set_target(self, target: VoxelGrid) -> None: ...
     def estimate(
@@ -271,7 +271,7 @@ def phase_correlation(
     grid_b: VoxelGrid | npt.ArrayLike,
     subvoxel: bool = True,
     subvoxel_band: float = 0.25,
-    max_voxels: int = 134217728,
+    max_voxels: int = 16777216,
 ) -> TranslationEstimate: ...  # shift (metres), shift_voxels, peak_voxels, peak
 def translation_cost(
     moving: VoxelGrid | npt.ArrayLike,

@@ -103,19 +103,27 @@ def pose_error(
     ------
     ValueError
         If a transform is not 4x4 or its rotation part is not a rotation (finite,
-        orthonormal within 1e-6), or ``center`` is not 3 numbers.
+        orthonormal within 1e-6), ``center`` is not 3 numbers, or the translation between
+        the poses overflows float64.
     """
     T = _pose(T, "T")
     point = np.zeros(3) if center is None else np.asarray(center, dtype=float)
     if point.shape != (3,) or not np.isfinite(point).all():
         raise ValueError(f"center must be 3 finite numbers (metres), got {point.tolist()}")
-    if T_true is None:
-        R = T[:3, :3]
-        offset = T[:3, 3] if center is None else R @ point + T[:3, 3] - point
-    else:
-        T_true = _pose(T_true, "T_true")
-        R = T_true[:3, :3].T @ T[:3, :3]
-        offset = T[:3, :3] @ point + T[:3, 3] - T_true[:3, :3] @ point - T_true[:3, 3]
+    with np.errstate(over="ignore", invalid="ignore"):  # checked below
+        if T_true is None:
+            R = T[:3, :3]
+            offset = T[:3, 3] if center is None else R @ point + T[:3, 3] - point
+        else:
+            T_true = _pose(T_true, "T_true")
+            R = T_true[:3, :3].T @ T[:3, :3]
+            offset = T[:3, :3] @ point + T[:3, 3] - T_true[:3, :3] @ point - T_true[:3, 3]
+    # hypot, not the norm of numpy, which squares: translations of 1e300 m gave inf.
+    distance = math.hypot(*np.asarray(offset, dtype=float).tolist())
+    if not math.isfinite(distance):
+        raise ValueError(
+            f"the translation between the poses overflows float64 (over 1e308 m): {offset.tolist()}"
+        )
     try:
         angle = rotation_angle(R)
     except ValueError as error:
@@ -125,4 +133,4 @@ def pose_error(
             else "T and T_true must be rigid transforms"
         )
         raise ValueError(f"{which}: {error}") from None
-    return PoseError(float(np.linalg.norm(offset)), angle)
+    return PoseError(distance, angle)

@@ -544,7 +544,7 @@ std::vector<Case> cases() {
          p.k_neighbors = -1;
          estimate_normals(object(), p);
        },
-       "k_neighbors must be >= 0"},
+       "k_neighbors must be in [0, 1024]"},
       {"normals_no_threads",
        [] {
          NormalEstimationParams p;
@@ -798,10 +798,17 @@ std::vector<Case> cases() {
       {"search_many_threads",
        [] {  // clamped to the work
          So3SearchParams p;
-         p.threads = 10000;
+         p.threads = 256;
          EXPECT_FALSE(so3_search(coefficients(4), coefficients(4), 4, p).empty());
        },
        ""},
+      {"search_too_many_threads",
+       [] {
+         So3SearchParams p;
+         p.threads = 10000;
+         so3_search(coefficients(4), coefficients(4), 4, p);
+       },
+       "params.threads must be in [1, 256]"},
       {"refine_bad_start",
        [] {
          So3Correlation c(coefficients(4), coefficients(4), 4);
@@ -886,8 +893,8 @@ std::vector<Case> cases() {
        [] { align(object(), object(), with([](AlignParams& p) { p.scene.voxel_size = -0.01; })); },
        "voxel_size must be >= 0 metres"},
       {"align_bandwidth",
-       [] { align(object(), object(), with([](AlignParams& p) { p.scene.bandwidth = 129; })); },
-       "bandwidth"},
+       [] { align(object(), object(), with([](AlignParams& p) { p.scene.bandwidth = 65; })); },
+       "bandwidth must be in [2, 64]"},
       {"align_gain",
        [] {
          align(object(), object(), with([](AlignParams& p) { p.local.translation_gain = 2.0; }));

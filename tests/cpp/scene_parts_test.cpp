@@ -395,8 +395,9 @@ TEST(BoundedGrid, KeepsTheSceneInReachOfTheModel) {
   EXPECT_EQ(kept.rows(), expected);
   const GridSpec bounded =
       bounded_translation_spec(points_box(kept), model, reach, voxel, GridLimits{});
-  const GridSpec unbounded =
-      bounded_translation_spec(points_box(scene), model, reach, voxel, GridLimits{});
+  // The whole 4 m scene at 1.5 cm is 320^3 voxels, over the default limit of 256^3.
+  const GridSpec unbounded = bounded_translation_spec(points_box(scene), model, reach, voxel,
+                                                      GridLimits{std::size_t{1} << 27});
   for (int a = 0; a < 3; ++a) {
     const int needed = int(std::ceil((model.sizes()[a] + 2 * reach) / voxel)) + 3;
     EXPECT_LE(bounded.dims[a], fft_friendly_size(needed)) << a;

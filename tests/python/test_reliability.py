@@ -53,12 +53,12 @@ def test_a_scene_needing_10_gb_is_refused_before_allocating():
     assert 8e9 < voxels * BYTES_PER_VOXEL < 12e9
     model = svs.PointCloud(*box_and_sphere(np.random.default_rng(1), 2000))
     before = peak_rss_bytes()
-    with pytest.raises(ValueError, match=r"exceeds the limit of 134217728 voxels \(max_voxels\)"):
+    with pytest.raises(ValueError, match=r"exceeds the limit of 16777216 voxels \(max_voxels\)"):
         svs.align(model, scene, voxel_size=voxel, downsample=False)
     # Nothing near the size of the grid was touched: the peak memory of the process did
     # not grow by even a tenth of it.
     assert peak_rss_bytes() - before < 1e9
-    assert svs.AlignParams().max_voxels == 2**27
+    assert svs.AlignParams().max_voxels == 2**24
 
 
 def test_the_limit_is_the_callers_to_raise():
@@ -73,7 +73,7 @@ def test_the_limit_is_the_callers_to_raise():
 def test_phase_correlation_refuses_its_grid_before_allocating():
     spec = svs.GridSpec([0.0, 0.0, 0.0], 0.01, [1200, 1200, 1200])  # about 35 GB of buffers
     before = peak_rss_bytes()
-    with pytest.raises(ValueError, match=r"GB\) exceeds the limit of 134217728 voxels"):
+    with pytest.raises(ValueError, match=r"GB\) exceeds the limit of 16777216 voxels"):
         svs.PhaseCorrelation(spec)
     with pytest.raises(ValueError, match="exceeds the limit of 1000 voxels"):
         svs.PhaseCorrelation(spec, max_voxels=1000)

@@ -173,7 +173,7 @@ def test_grid_spec_limits_and_fft_sizes(rng):
     cloud = svs.PointCloud(points)
     spec = svs.make_grid_spec(cloud, cloud, 0.008)
     assert all(svs.fft_friendly_size(int(n)) == n for n in spec.dims)
-    with pytest.raises(ValueError, match=r"exceeds the limit of 134217728 voxels"):
+    with pytest.raises(ValueError, match=r"exceeds the limit of 16777216 voxels"):
         svs.make_grid_spec(cloud, cloud, 0.0005)
     with pytest.raises(ValueError, match="limit of 1000 voxels"):
         svs.make_grid_spec(cloud, cloud, 0.008, max_voxels=1000)

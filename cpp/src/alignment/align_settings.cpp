@@ -11,12 +11,16 @@ namespace spectral_vs::detail {
 
 namespace {
 
+// Iterations of Algorithm 1: the alignments of the benchmarks converge within 50, and 10^6
+// ran past any time a caller waits for (2^31 - 1 was a hang without max_seconds).
+constexpr int kMaxIterations = 10000;
+
 void check(const SceneParams& p) {
   if (!(p.voxel_size >= 0.0 && std::isfinite(p.voxel_size))) {
     fail("voxel_size must be >= 0 metres (0: derived from the model), got ", p.voxel_size);
   }
-  if (p.bandwidth < 2 || p.bandwidth > kMaxBandwidth) {
-    fail("bandwidth must be in [2, ", kMaxBandwidth, "], got ", p.bandwidth);
+  if (p.bandwidth < 2 || p.bandwidth > kMaxAlignBandwidth) {
+    fail("bandwidth must be in [2, ", kMaxAlignBandwidth, "], got ", p.bandwidth);
   }
   if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
   if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
@@ -32,7 +36,9 @@ void check(const LocalParams& p) {
   }
   detail::require_positive_finite(p.max_rotation_step, "max_rotation_step");
   detail::require_positive_finite(p.tolerance, "tolerance");
-  if (p.max_iterations < 1) fail("max_iterations must be >= 1, got ", p.max_iterations);
+  if (p.max_iterations < 1 || p.max_iterations > kMaxIterations) {
+    fail("max_iterations must be in [1, ", kMaxIterations, "], got ", p.max_iterations);
+  }
   if (!(p.max_translation >= 0.0 && std::isfinite(p.max_translation))) {
     fail("max_translation must be >= 0 metres (0: unbounded), got ", p.max_translation);
   }
@@ -58,8 +64,9 @@ void check(const GlobalSearchParams& p) {
 }
 
 void check(const RefinementParams& p) {
-  if (p.refinement_iterations < 1) {
-    fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
+  if (p.refinement_iterations < 1 || p.refinement_iterations > kMaxIterations) {
+    fail("refinement_iterations must be in [1, ", kMaxIterations, "], got ",
+         p.refinement_iterations);
   }
 }
 

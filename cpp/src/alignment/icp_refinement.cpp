@@ -17,7 +17,9 @@ IcpScene::IcpScene(const PointCloud& scene, const Eigen::AlignedBox3d& around, d
     : scene_(scene) {
   constexpr double kMaxCells = 4194304.0;  // 2^22: 32 MB of offsets at most
   const Eigen::Array3d extent = around.sizes().array();
-  cell_ = max_distance;
+  // From a millionth of the extent at least: 1.25 times the smallest denormal is itself,
+  // and the loop below never ended for pose_covariance(voxel_size=5e-324).
+  cell_ = std::max(max_distance, 1e-6 * extent.maxCoeff());
   origin_ = around.min();
   // Coarser cells for a large model (a flat one too): still at least max_distance wide.
   // Counted in double, so that no count overflows an int before it is checked.

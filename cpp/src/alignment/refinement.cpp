@@ -237,8 +237,9 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
   detail::IcpSettings settings;
   settings.viewpoint = problem.viewpoint;
   // The fine stage only for a densely sampled model (kIcpFineDistance).
-  const detail::IcpOutcome icp = detail::refine_in_two_stages(
-      model, scene, result.T_scene_model, problem.params.scene.voxel_size, settings, problem.dense_model);
+  const detail::IcpOutcome icp =
+      detail::refine_in_two_stages(model, scene, result.T_scene_model,
+                                   problem.params.scene.voxel_size, settings, problem.dense_model);
   const Transform& T_scene_model = icp.T_scene_model;
   const int iterations = icp.iterations;
   if (iterations == 0) return;

@@ -297,6 +297,7 @@ PoseCovariance pose_covariance(const PointCloud& model, const PointCloud& scene,
   require_normals(model, "model");
   require_normals(scene, "scene");
   detail::require_positive_finite(voxel_size, "voxel_size");
+  if (voxel_size > 1e6) detail::fail("voxel_size must be <= 1e6 m, got ", voxel_size);
   require_rigid_transform(T_scene_model, "T_scene_model");
   // The pairs' grid alone (as the verification's, without its visibility grid).
   const double pairs = kInlierVoxels * voxel_size;

@@ -110,13 +110,13 @@ void check_params(const ViewAlignParams& p) {
     fail("search_voxel_size must be >= 0 metres (0: twice the voxel), got ", p.search_voxel_size);
   if (!(p.voxels_across >= 4.0 && std::isfinite(p.voxels_across)))
     fail("voxels_across must be finite and >= 4, got ", p.voxels_across);
-  if (p.bandwidth < 2 || p.bandwidth > kMaxBandwidth)
-    fail("bandwidth must be in [2, ", kMaxBandwidth, "], got ", p.bandwidth);
+  if (p.bandwidth < 2 || p.bandwidth > kMaxAlignBandwidth)
+    fail("bandwidth must be in [2, ", kMaxAlignBandwidth, "], got ", p.bandwidth);
   if (p.hypotheses < 1) fail("hypotheses must be >= 1, got ", p.hypotheses);
   if (p.refinements < 1 || p.refinements > p.hypotheses)
     fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
-  if (p.refinement_iterations < 1)
-    fail("refinement_iterations must be >= 1, got ", p.refinement_iterations);
+  if (p.refinement_iterations < 1 || p.refinement_iterations > 10000)
+    fail("refinement_iterations must be in [1, 10000], got ", p.refinement_iterations);
   if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
   if (!(p.window_search_below >= 0.0 && p.window_search_below <= 1.0))
     fail("window_search_below must be in [0, 1] (a support score; 0: never), got ",

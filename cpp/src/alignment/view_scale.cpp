@@ -31,7 +31,7 @@ double typical_size(const Points& points) {
     centre[axis] = median(values);
   }
   for (Eigen::Index i = 0; i < points.rows(); ++i)
-    values[std::size_t(i)] = (points.row(i).transpose() - centre).norm();
+    values[std::size_t(i)] = (points.row(i).transpose() - centre).stableNorm();  // no overflow
   return 2.0 * median(values);
 }
 

@@ -351,7 +351,10 @@ Transform Kinematics::tip_pose(const Eigen::VectorXd& q) const {
   KDL::Frame F_base_tip;
   KDL::ChainFkSolverPos_recursive solver(model_->chain);
   if (solver.JntToCart(joints, F_base_tip) < 0) fail("q: KDL forward kinematics failed");
-  return to_transform(F_base_tip);
+  const Transform T_base_tip = to_transform(F_base_tip);
+  // A prismatic joint at 1e308 m moves the tip past the largest double.
+  if (!T_base_tip.allFinite()) fail("q: the tip's pose at these joint positions overflows");
+  return T_base_tip;
 }
 
 Transform Kinematics::forward(const Eigen::VectorXd& q) const {
@@ -379,6 +382,7 @@ Jacobian Kinematics::jacobian(const Eigen::VectorXd& q) const {
     J.block<3, 1>(0, i) = R_camera_base * (v + omega.cross(p_base));
     J.block<3, 1>(3, i) = R_camera_base * omega;
   }
+  if (!J.allFinite()) fail("q: the Jacobian at these joint positions overflows");
   return J;
 }
 

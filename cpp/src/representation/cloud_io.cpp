@@ -850,6 +850,15 @@ Points load_points(const std::string& path, CloudFileInfo* info) {
 void save_cloud(const std::string& path, const PointCloud& cloud, PcdEncoding encoding) {
   const Format format = format_from_extension(path);
   require_non_empty(cloud, "cloud");
+  // Writing to a FIFO blocks until a reader opens it (a hang), to a folder fails deep
+  // inside PCL: only a regular file, or none yet, is written.
+  std::error_code error;
+  const auto existing = std::filesystem::status(path, error);
+  if (std::filesystem::exists(existing) && !std::filesystem::is_regular_file(existing)) {
+    fail("path: ", path,
+         std::filesystem::is_directory(existing) ? " is a folder" : " is not a regular file",
+         ", not a file to write a cloud to");
+  }
   // The files store float32: a coordinate beyond its range would be written as inf.
   constexpr double kFloatMax = double(std::numeric_limits<float>::max());
   for (Eigen::Index i = 0; i < cloud.points().rows(); ++i) {

@@ -4,15 +4,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace spectral_vs {
 
 using detail::fail;
 
 std::size_t GridSpec::voxel_count() const {
-  return static_cast<std::size_t>(std::max(dims.x(), 0)) *
-         static_cast<std::size_t>(std::max(dims.y(), 0)) *
-         static_cast<std::size_t>(std::max(dims.z(), 0));
+  // Saturated: (2^30)^3 wrapped to 0.
+  std::size_t count = 1;
+  for (int axis = 0; axis < 3; ++axis) {
+    const auto side = static_cast<std::size_t>(std::max(dims[axis], 0));
+    if (__builtin_mul_overflow(count, side, &count)) return std::numeric_limits<std::size_t>::max();
+  }
+  return count;
 }
 
 namespace {

@@ -21,6 +21,10 @@ Eigen::Matrix3d exp_so3(const Eigen::Vector3d& given) {
   Eigen::Vector3d omega = given;
   const double full = omega.stableNorm();      // no overflow of the squares of 1e200
   constexpr double kTurn = 6.283185307179586;  // 2 pi
+  if (omega.allFinite() && !std::isfinite(full)) {
+    fail("omega: its norm exceeds the largest double (", omega.cwiseAbs().maxCoeff(),
+         " rad on an axis): no angle to reduce");
+  }
   if (std::isfinite(full) && full > kTurn) omega *= std::fmod(full, kTurn) / full;
   const double angle = omega.norm();
   const Eigen::Matrix3d K = hat(omega);
@@ -43,7 +47,8 @@ Eigen::Vector3d log_so3(const Eigen::Matrix3d& R) {
 }
 
 double rotation_distance(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-  return log_so3(a.transpose() * b).norm();
+  // angle * (|v| / |v|) may round one ulp past pi.
+  return std::min(log_so3(a.transpose() * b).norm(), 3.141592653589793);
 }
 
 Eigen::Matrix3d euler_zyz(double alpha, double beta, double gamma) {

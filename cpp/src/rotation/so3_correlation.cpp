@@ -14,10 +14,18 @@ namespace {
 ShCoefficients prepared(const ShCoefficients& c, int bandwidth, bool normalised,
                         const char* argument) {
   require_coefficients(c, bandwidth, argument);
-  if (!normalised) return c;
+  if (!normalised) {
+    // |C| <= |t| |f| (U orthogonal), its derivatives up to l^2 times that: finite below it.
+    constexpr double kMaxRawNorm = 1e150;
+    if (const double norm = c.stableNorm(); norm > kMaxRawNorm) {
+      fail(argument, " has norm ", norm, ", over ", kMaxRawNorm,
+           ": the raw correlation (normalised=False) of it would overflow");
+    }
+    return c;
+  }
   ShCoefficients out = c;
   out[0] = 0.0;
-  const double norm = out.norm();
+  const double norm = out.stableNorm();
   if (!(norm > 0.0)) {
     fail(argument,
          " has no energy at degrees l >= 1 (a uniform EGI): the normalised correlation is "
@@ -55,6 +63,9 @@ So3Correlation::So3Correlation(const ShCoefficients& target, const ShCoefficient
                                int bandwidth, bool normalised)
     : bandwidth_(bandwidth), normalised_(normalised) {
   detail::prepare_correlation(target, model, bandwidth, normalised, target_, model_);
+  if (const double scale = target_.norm() * model_.norm(); !normalised && scale > 0.0) {
+    scale_ = scale;
+  }
   // The model side of eq. (15) and of the Hessian does not depend on R: apply the
   // generators once here, so an evaluation costs U(R) and one product per degree.
   for (int k = 0; k < 3; ++k) model_first_[k] = apply_generator(k, model_, bandwidth);

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 import time
 from collections.abc import Callable
 
@@ -67,11 +68,33 @@ def run_servo(
     -------
     ServoLog
         The records, the final status and its reason.
+
+    Raises
+    ------
+    TypeError
+        For ``dt``, ``max_steps`` or ``max_time`` that is not a number (``max_steps`` an
+        integer), or ``velocity_params`` that is not a :class:`VelocityCommandParams`.
+    ValueError
+        For ``dt`` that is not finite and > 0, ``max_steps`` < 1 or a NaN ``max_time``.
     """
+    for name, value, kind in (
+        ("dt", dt, numbers.Real),
+        ("max_steps", max_steps, numbers.Integral),
+        ("max_time", max_time, numbers.Real),
+    ):
+        if isinstance(value, bool) or not isinstance(value, kind):
+            what = "an integer" if kind is numbers.Integral else "a number"
+            raise TypeError(f"{name} must be {what}, got {value!r}")
     if not dt > 0 or not math.isfinite(dt):
         raise ValueError(f"dt must be finite and > 0, got {dt}")
     if max_steps < 1:
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    if math.isnan(max_time):
+        raise ValueError("max_time must be a number of seconds (inf: no budget), got nan")
+    if velocity_params is not None and not isinstance(velocity_params, VelocityCommandParams):
+        raise TypeError(
+            f"velocity_params must be a VelocityCommandParams, got {type(velocity_params).__name__}"
+        )
     params = (
         copy.copy(velocity_params)
         if velocity_params is not None

@@ -5,7 +5,7 @@ ends (:data:`REASONS`) or a step holds the robot still (:data:`HOLDS`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 import numpy as np
@@ -242,7 +242,19 @@ class ServoLog:
         return self.status.state == "converged"
 
     def array(self, name: str) -> np.ndarray:
-        """One field of every record stacked in an array, e.g. ``log.array("twist")``."""
+        """One field of every record stacked in an array, e.g. ``log.array("twist")``.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not a field of :class:`ServoRecord` (the message lists them),
+            also for a log without records.
+        """
+        names = [item.name for item in fields(ServoRecord)]
+        if not isinstance(name, str) or name not in names:
+            raise ValueError(
+                f"name must be a field of ServoRecord ({', '.join(names)}), got {name!r}"
+            )
         return np.array([getattr(record, name) for record in self.records])
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_downsample
-from spectral_vs.poses import rotation_vector
+from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import prepare
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
 from spectral_vs.servo.scale import ServoScale, crop_to_depth
@@ -98,6 +98,11 @@ class ControllerState:
             ``|v| <= max_linear_speed`` and ``|omega| <= max_angular_speed``.
         scale : float
             The factor in (0, 1] that was applied.
+
+        Raises
+        ------
+        ValueError
+            If ``T_current_desired`` is not a finite 4 x 4 rigid transform.
         """
-        T = np.asarray(T_current_desired, dtype=float)
+        T = _pose(T_current_desired, "T_current_desired")  # ValueError unless 4 x 4 and finite
         return _saturated_twist(T[:3, 3], rotation_vector(T[:3, :3]), self.params.law)

@@ -33,6 +33,10 @@ enum class SceneView {
 };
 
 /// The scene and its representation (`AlignParams::scene`): the voxel grids, the EGIs and
+/// The largest bandwidth of an alignment (align, align_views): at 128 the global search's
+/// refinements took 116 s for a 400-point model (64: 0.8 s, 96: 4.2 s).
+inline constexpr int kMaxAlignBandwidth = 64;
+
 /// what the scene is to its sensor. Read by every stage (the voxel is the unit of every
 /// length), and by the scene preparation alone for the sensor and the support plane.
 struct SceneParams {
@@ -78,15 +82,15 @@ struct LocalParams {
   double max_rotation_step = 0.25;  ///< Largest rotation of one iteration, radians.
   double tolerance = 0.02;          ///< eps_g of eq. (17): stop when |translation step| in voxels
                                     ///< plus |grad C| (normalised correlation per radian) < eps_g.
-  int max_iterations = 100;         ///< Iterations of Algorithm 1, >= 1, without global search (the
-                                    ///< paper's mode; the global search's: refinement_iterations).
-  bool subvoxel = true;             ///< Sub-voxel refinement of the phase-correlation peak.
-  double max_translation = 0.0;     ///< Without global search: the largest translation from the
-                                    ///< initial guess that is sought, metres, per axis. The grid
-                                    ///< then holds the scene and the model's start grown by this
-                                    ///< (not by the model's reach), all iterations run on it, and
-                                    ///< farther phase-correlation peaks are ignored: for two views
-                                    ///< of one scene, as in servoing. 0: unbounded (the paper).
+  int max_iterations = 100;  ///< Iterations of Algorithm 1, in [1, 10^4], without global search
+                             ///< (the paper's mode; the global search's: refinement_iterations).
+  bool subvoxel = true;      ///< Sub-voxel refinement of the phase-correlation peak.
+  double max_translation = 0.0;  ///< Without global search: the largest translation from the
+                                 ///< initial guess that is sought, metres, per axis. The grid
+                                 ///< then holds the scene and the model's start grown by this
+                                 ///< (not by the model's reach), all iterations run on it, and
+                                 ///< farther phase-correlation peaks are ignored: for two views
+                                 ///< of one scene, as in servoing. 0: unbounded (the paper).
 };
 
 /// The global search (`AlignParams::search`; beyond the paper): the SO(3) search, the
@@ -128,7 +132,7 @@ struct GlobalSearchParams {
 /// 1 from each (with LocalParams' gains), the flat-axis sweep and polish, the ICP. Without
 /// global search, by nothing.
 struct RefinementParams {
-  /// Iterations of Algorithm 1 per refinement, >= 1. Each starts at a verified hypothesis
+  /// Iterations of Algorithm 1 per refinement, in [1, 10^4]. Each starts at a verified hypothesis
   /// and is then polished and ICP-refined: 20 ended as well as 100 on every experiment
   /// family (docs/experiments.md), where cluttered windows made a third of the runs
   /// chatter to 100 without converging.
@@ -212,8 +216,8 @@ struct AlignParams {
   double max_seconds = 0.0;
   /// Memory cap: any grid over limits.max_voxels voxels (scene map, translation grids,
   /// windows) is refused with std::invalid_argument before it is allocated. The largest
-  /// grids cost about 28 bytes per voxel (values, FFT buffers), so the default 2^27 voxels
-  /// bounds one grid at about 3.8 GB.
+  /// grids cost about 28 bytes per voxel (values, FFT buffers) and an alignment holds
+  /// several: the default 2^24 voxels bounds an alignment at about 1 GB.
   GridLimits limits = {};
 };
 

@@ -105,6 +105,8 @@ const char* verdict_name(Verdict verdict);
 /// radians and of the scene's typical size) keeps the directions that no surface
 /// constrains (along a plane, about a cylinder's axis) finite. With fewer than 7 pairs,
 /// the prior alone.
+/// @throws std::invalid_argument for empty clouds, clouds without normals, a transform
+///         that is not rigid, or a voxel_size not in (0, 1e6] metres.
 PoseCovariance pose_covariance(const PointCloud& model, const PointCloud& scene,
                                const Transform& T_scene_model, double voxel_size);
 

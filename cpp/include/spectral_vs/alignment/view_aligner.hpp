@@ -41,13 +41,13 @@ struct ViewAlignParams {
   double search_voxel_size = 0.0;  ///< Voxel of the hypotheses' placement, metres; 0: 2 voxels.
   double voxels_across = 32.0;     ///< With voxel_size = 0: voxels across the views' typical size.
   bool downsample = true;          ///< Downsample both views to half a voxel first (PCL VoxelGrid).
-  int bandwidth = 16;              ///< B of the EGIs and of the SO(3) search.
+  int bandwidth = 16;              ///< B of the EGIs and of the SO(3) search, in [2, 64].
   int hypotheses = 16;             ///< Rotations of the SO(3) search placed and checked, >= 1.
   int refinements = 1;             ///< Best-checked hypotheses refined by Algorithm 1 and the
                                    ///< ICP, in [1, hypotheses]; the best-scored one is kept.
                                    ///< 1: on 120 scan and rendered pairs 3 won none more
                                    ///< (docs/views.md) at 1.5-2 times the time.
-  int refinement_iterations = 3;   ///< Iterations of Algorithm 1 per refinement, >= 1.
+  int refinement_iterations = 3;   ///< Iterations of Algorithm 1 per refinement, in [1, 10^4].
   bool icp_refinement = true;      ///< Point-to-plane ICP after Algorithm 1 (pairs within a
                                    ///< voxel, then 0.4 voxel; Gauss-Newton), kept if it does not
                                    ///< lower the score.

@@ -31,7 +31,8 @@ enum class NormalOrientation {
 /// Settings of `estimate_normals`.
 struct NormalEstimationParams {
   double radius = 0.015;  ///< Neighbourhood radius in metres (used when k_neighbors == 0).
-  int k_neighbors = 0;    ///< If > 0, use this many nearest neighbours instead of a radius.
+  int k_neighbors = 0;    ///< If > 0, use this many nearest neighbours instead of a radius
+                          ///< (at most 1024; more than the cloud's points means all of them).
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();  ///< Sensor origin, metres.
   NormalOrientation orientation = NormalOrientation::toward_viewpoint;
   int threads = 1;  ///< OpenMP threads in [1, 256]; results do not depend on it.
@@ -46,7 +47,7 @@ struct NormalEstimationParams {
 /// 1e12 m) change no other point's neighbours or normal; points 1e18 m or more from that
 /// reference on an axis are not searched and get no normal.
 /// @throws std::invalid_argument for an empty cloud, non-finite or non-positive
-///         radius, negative k, threads outside [1, 256], or when no point gets a normal
+///         radius, k outside [0, 1024], threads outside [1, 256], or when no point gets a normal
 ///         (the message counts the points too far to be searched).
 PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParams& params = {});
 

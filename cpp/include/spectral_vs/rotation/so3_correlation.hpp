@@ -46,10 +46,13 @@ class So3Correlation {
 
   int bandwidth() const { return bandwidth_; }
   bool normalised() const { return normalised_; }
+  /// |target| |model| as correlated, the bound of |C| (1 when normalised; 1 for zero input).
+  double scale() const { return scale_; }
 
  private:
   int bandwidth_;
   bool normalised_;
+  double scale_ = 1.0;
   ShCoefficients target_, model_;               // as correlated (normalised when asked)
   std::array<ShCoefficients, 3> model_first_;   // u_k F, k = x, y, z
   std::array<ShCoefficients, 6> model_second_;  // (u_i u_j + u_j u_i) F / 2: xx yy zz xy xz yz

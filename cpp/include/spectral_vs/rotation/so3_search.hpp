@@ -18,8 +18,10 @@ struct RotationCandidate {
 
 /// Settings of so3_search.
 struct So3SearchParams {
-  int candidates = 8;             ///< k: at most this many local maxima are returned, >= 1
-  int threads = 1;                ///< worker threads over the beta planes of the grid, >= 1
+  int candidates = 8;  ///< k: at most this many local maxima are returned, >= 1
+  int threads = 1;     ///< worker threads over the beta planes of the grid, in [1, 256]; at most
+                       ///< 2B run, and no more than 256 MB of their Wigner matrices allow
+                       ///< (11 at B = 128); results do not depend on it
   bool normalised = true;         ///< correlate as So3Correlation(..., normalised)
   double separation_cells = 1.5;  ///< a maximum within this many grid steps (pi / B rad each)
                                   ///< of a better one is dropped (duplicates near beta = 0, pi)
@@ -45,8 +47,9 @@ struct RotationRefineParams {
   double gain = 0.05;                ///< initial gradient step: R <- R exp(gain hat(gradient)),
                                      ///< rad per unit of gradient (C per rad); halved whenever a
                                      ///< step lowers C or reverses the gradient (an overshoot)
-  int max_iterations = 100;          ///< iterations (evaluations with accepted steps)
-  double gradient_tolerance = 1e-6;  ///< converged when |gradient| < this, correlation per rad
+  int max_iterations = 100;          ///< iterations (evaluations with accepted steps), <= 10^4
+  double gradient_tolerance = 1e-6;  ///< converged when |gradient| < this times
+                                     ///< So3Correlation::scale(), per rad
   bool newton = true;                ///< step -H^-1 gradient when the Hessian is negative definite
   double max_step = 0.25;            ///< largest rotation of one step, rad
 };
