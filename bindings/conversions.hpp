@@ -6,6 +6,8 @@
 #include <spectral_vs/representation/voxel_grid.hpp>
 #include <spectral_vs/rotation/egi_coefficients.hpp>
 
+#include "common/paths.hpp"
+
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -127,21 +129,13 @@ inline std::size_t to_max_voxels(long long value) {
 // What a reader is given must be a regular file: a folder, a FIFO (whose reader would
 // block) or a symbolic link loop is named as such, not as a missing file.
 inline void require_file(const std::filesystem::path& path, const char* argument) {
-  std::error_code error;
-  const auto status = std::filesystem::status(path, error);
-  if (error == std::errc::too_many_symbolic_link_levels) {
-    raise_path_error(PyExc_OSError, argument, "too many levels of symbolic links (a loop)", path);
-  }
-  if (error || !std::filesystem::exists(status)) {
-    raise_path_error(PyExc_FileNotFoundError, argument, "no such file", path);
-  }
-  if (std::filesystem::is_directory(status)) {
-    raise_path_error(PyExc_IsADirectoryError, argument, "is a folder, not a file", path);
-  }
-  if (!std::filesystem::is_regular_file(status)) {
-    raise_path_error(PyExc_ValueError, argument, "is not a regular file (a FIFO, socket or device)",
-                     path);
-  }
+  using detail::PathKind;
+  const PathKind kind = detail::path_kind(path);
+  PyObject* const type = kind == PathKind::loop      ? PyExc_OSError
+                         : kind == PathKind::missing ? PyExc_FileNotFoundError
+                         : kind == PathKind::folder  ? PyExc_IsADirectoryError
+                                                     : PyExc_ValueError;
+  if (kind != PathKind::file) raise_path_error(type, argument, detail::path_problem(kind), path);
 }
 
 inline Points normals_of(const py::handle& object) {

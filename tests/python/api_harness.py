@@ -71,6 +71,7 @@ from test_properties import (  # noqa: E402
     assert_finite,
     floats_any,
     int64,
+    resident_megabytes,
     rotations,
     seeds,
 )
@@ -422,11 +423,6 @@ class Refused:
 
 
 REFUSED: Any = Refused()
-
-
-def resident_megabytes() -> float:
-    with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
 def reset_peak() -> None:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import box_and_sphere
+from test_properties import resident_megabytes
 
 import spectral_vs as svs
 from spectral_vs.cli import main as cli_main
@@ -1416,11 +1417,6 @@ def test_a_large_depth_frame_leaves_no_large_scratch_behind():
     assert len(cloud) > 8_000_000
     del cloud
     assert resident_megabytes() - before < 150.0
-
-
-def resident_megabytes() -> float:
-    with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * 4096 / 2**20
 
 
 def test_every_bandwidth_once_leaves_a_bounded_cache():

@@ -409,7 +409,7 @@ int32_edges = st.sampled_from([-(2**31), -1, 0, 1, 2, 3, 2**16 + 1, 2**30, 2**31
 
 def resident_megabytes() -> float:
     with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * 4096 / 2**20
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
 @settings(

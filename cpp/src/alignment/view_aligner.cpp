@@ -115,8 +115,9 @@ void check_params(const ViewAlignParams& p) {
   if (p.hypotheses < 1) fail("hypotheses must be >= 1, got ", p.hypotheses);
   if (p.refinements < 1 || p.refinements > p.hypotheses)
     fail("refinements must be in [1, hypotheses = ", p.hypotheses, "], got ", p.refinements);
-  if (p.refinement_iterations < 1 || p.refinement_iterations > 10000)
-    fail("refinement_iterations must be in [1, 10000], got ", p.refinement_iterations);
+  if (p.refinement_iterations < 1 || p.refinement_iterations > kMaxAlignIterations)
+    fail("refinement_iterations must be in [1, ", kMaxAlignIterations, "], got ",
+         p.refinement_iterations);
   if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
   if (!(p.window_search_below >= 0.0 && p.window_search_below <= 1.0))
     fail("window_search_below must be in [0, 1] (a support score; 0: never), got ",

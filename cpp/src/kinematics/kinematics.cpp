@@ -1,6 +1,7 @@
 #include <spectral_vs/kinematics/kinematics.hpp>
 
 #include "common/checks.hpp"
+#include "common/paths.hpp"
 
 #include <urdf_parser/urdf_parser.h>
 #include <Eigen/Geometry>
@@ -179,14 +180,9 @@ void require_shallow_xml(const std::string& xml) {
 }
 
 std::string read_file(const std::string& path) {
-  std::error_code error;
-  const auto status = std::filesystem::status(path, error);
-  if (std::filesystem::is_directory(status))
-    fail("urdf_path: is a folder, not a file: '", path, "'");
-  if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status)) {
-    fail("urdf_path: is not a regular file (a FIFO, socket or device): '", path, "'");
+  if (const auto kind = detail::path_kind(path); kind != detail::PathKind::file) {
+    fail("urdf_path: ", detail::path_problem(kind), ": '", path, "'");
   }
-  if (!std::filesystem::is_regular_file(status)) fail("urdf_path: no such file: '", path, "'");
   std::ifstream in(path);
   if (!in) fail("urdf_path: cannot read '", path, "'");
   std::ostringstream text;

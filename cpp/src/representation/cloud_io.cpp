@@ -1,6 +1,7 @@
 #include <spectral_vs/representation/cloud_io.hpp>
 
 #include "common/checks.hpp"
+#include "common/paths.hpp"
 #include "representation/pcd_ascii.hpp"
 
 #include <pcl/PCLPointCloud2.h>
@@ -401,7 +402,7 @@ class PlyInstanceReader {
   PlyInstanceReader(std::ifstream& file, bool ascii, bool big_endian)
       : file_(file), ascii_(ascii), big_endian_(big_endian) {}
 
-  // Calls `item(property, value text or "", value)` for each list item of the instance.
+  // Calls `item(value text, or "" for binary data, value)` for each list item of the instance.
   template <class Item>
   bool read(const std::vector<PlyProperty>& properties, const Item& item) {
     if (ascii_) return read_ascii(properties, item);
@@ -414,7 +415,7 @@ class PlyInstanceReader {
       const int size = ply_type_size(property.type);
       for (long long k = 0; k < static_cast<long long>(count); ++k) {
         if (!file_.read(buffer, size)) return false;
-        item(property, std::string(), ply_scalar(buffer, property.type, big_endian_));
+        item(std::string(), ply_scalar(buffer, property.type, big_endian_));
       }
     }
     return true;
@@ -435,7 +436,7 @@ class PlyInstanceReader {
       }
       const long long count = parse_count(tokens[at++]);
       if (count < 0 || count > static_cast<long long>(tokens.size() - at)) return false;
-      for (long long k = 0; k < count; ++k, ++at) item(property, tokens[at], 0.0);
+      for (long long k = 0; k < count; ++k, ++at) item(tokens[at], 0.0);
     }
     return true;
   }
@@ -456,7 +457,7 @@ void check_ply_range_grid(std::ifstream& file, const std::vector<PlyElement>& el
   for (const PlyElement& element : elements) {
     const bool grid = element.name == "range_grid";
     for (long long i = 0; i < element.count; ++i) {
-      const auto check_index = [&](const PlyProperty&, const std::string& text, double value) {
+      const auto check_index = [&](const std::string& text, double value) {
         if (!grid) return;
         if (!text.empty()) {
           char* end = nullptr;
@@ -605,10 +606,6 @@ PlyLayout check_ply(const std::string& path) {
 // cloud, so the file is checked here first. Returns a PLY file's layout (nothing for PCD,
 // whose check covers its data).
 std::optional<PlyLayout> check_header(const std::string& path, Format format) {
-  std::error_code error;
-  if (!std::filesystem::is_regular_file(path, error)) {
-    fail("path: no such file: ", path);
-  }
   if (format == Format::pcd) {
     check_pcd(path);
     return std::nullopt;
@@ -742,8 +739,9 @@ class Snapshot {
              ("spectral_vs_" + std::to_string(::getpid()) + "_" + std::to_string(count++) +
               extension.string()))
                 .string();
-    std::error_code error;
-    if (!std::filesystem::is_regular_file(path, error)) fail("path: no such file: ", path);
+    if (const auto kind = detail::path_kind(path); kind != detail::PathKind::file) {
+      fail("path: ", detail::path_problem(kind), ": ", path);
+    }
     std::ifstream in(path, std::ios::binary);
     if (!in) fail("path: cannot read ", path);
     std::ofstream out(path_, std::ios::binary | std::ios::trunc);
@@ -753,6 +751,7 @@ class Snapshot {
     }
     out.close();
     if (!out) {
+      std::error_code error;
       std::filesystem::remove(path_, error);
       fail("path: cannot copy ", path, " for reading (to ", path_, ")");
     }
@@ -852,11 +851,10 @@ void save_cloud(const std::string& path, const PointCloud& cloud, PcdEncoding en
   require_non_empty(cloud, "cloud");
   // Writing to a FIFO blocks until a reader opens it (a hang), to a folder fails deep
   // inside PCL: only a regular file, or none yet, is written.
-  std::error_code error;
-  const auto existing = std::filesystem::status(path, error);
-  if (std::filesystem::exists(existing) && !std::filesystem::is_regular_file(existing)) {
+  if (const auto kind = detail::path_kind(path);
+      kind != detail::PathKind::file && kind != detail::PathKind::missing) {
     fail("path: ", path,
-         std::filesystem::is_directory(existing) ? " is a folder" : " is not a regular file",
+         kind == detail::PathKind::folder ? " is a folder" : " is not a regular file",
          ", not a file to write a cloud to");
   }
   // The files store float32: a coordinate beyond its range would be written as inf.

@@ -155,7 +155,6 @@ std::shared_ptr<const SphericalHarmonicTransform> cached_transform(int bandwidth
   };
   static std::mutex mutex;
   static std::list<Entry> cache;  // most recently used last
-  static long long cached_bytes = 0;
   std::lock_guard<std::mutex> lock(mutex);
   const auto hit = std::find_if(cache.begin(), cache.end(),
                                 [bandwidth](const Entry& e) { return e.bandwidth == bandwidth; });
@@ -164,12 +163,13 @@ std::shared_ptr<const SphericalHarmonicTransform> cached_transform(int bandwidth
     return cache.back().transform;
   }
   cache.push_back({bandwidth, std::make_shared<const SphericalHarmonicTransform>(bandwidth)});
-  cached_bytes += bytes_of(bandwidth);
+  const auto cached_bytes = [&] {
+    long long total = 0;
+    for (const Entry& entry : cache) total += bytes_of(entry.bandwidth);
+    return total;
+  };
   // Least recently used first; a caller still holding one keeps it alive until done.
-  while (cached_bytes > kCachedTransformBytes && cache.size() > 1) {
-    cached_bytes -= bytes_of(cache.front().bandwidth);
-    cache.pop_front();
-  }
+  while (cache.size() > 1 && cached_bytes() > kCachedTransformBytes) cache.pop_front();
   return cache.back().transform;
 }
 

@@ -36,6 +36,10 @@ enum class SceneView {
 /// The largest bandwidth of an alignment (align, align_views): at 128 the global search's
 /// refinements took 116 s for a 400-point model (64: 0.8 s, 96: 4.2 s).
 inline constexpr int kMaxAlignBandwidth = 64;
+/// The most iterations of Algorithm 1 an alignment takes (max_iterations,
+/// refinement_iterations, whose defaults are 100 and 20): 2^31 - 1 never returned without
+/// max_seconds.
+inline constexpr int kMaxAlignIterations = 10000;
 
 /// what the scene is to its sensor. Read by every stage (the voxel is the unit of every
 /// length), and by the scene preparation alone for the sensor and the support plane.
