@@ -109,14 +109,9 @@ inline std::size_t to_max_voxels(long long value) {
   if (value < 1) {
     throw py::value_error("max_voxels must be >= 1 (a voxel budget), got " + std::to_string(value));
   }
-  // A grid of 2^32 float voxels is 16 GB, more than the FFT buffers beside it leave of
-  // most machines: a larger budget gave std::bad_alloc instead of an error naming it.
-  constexpr long long kMaxBudget = 1LL << 32;
-  if (value > kMaxBudget) {
-    throw py::value_error("max_voxels must be <= 2^32 = 4294967296 (a 16 GB grid), got " +
-                          std::to_string(value));
-  }
-  return static_cast<std::size_t>(value);
+  const GridLimits limits{static_cast<std::size_t>(value)};
+  check_grid_limits(limits);  // refused where it is set, as well as where it is used
+  return limits.max_voxels;
 }
 
 [[noreturn]] inline void raise_path_error(PyObject* type, const char* argument,

@@ -157,7 +157,7 @@ void define_view_aligner(py::module_& m) {
           })
       .def_property(
           "max_voxels", [](const ViewAlignParams& p) { return p.limits.max_voxels; },
-          [](ViewAlignParams& p, std::size_t v) { p.limits.max_voxels = v; });
+          [](ViewAlignParams& p, long long v) { p.limits.max_voxels = to_max_voxels(v); });
 
   py::class_<ViewSupport>(m, "ViewSupport", R"doc(
 How well the current view supports a pose of the reference: the reference, moved by the

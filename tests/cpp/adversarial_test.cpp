@@ -892,6 +892,19 @@ std::vector<Case> cases() {
       {"align_voxel_negative",
        [] { align(object(), object(), with([](AlignParams& p) { p.scene.voxel_size = -0.01; })); },
        "voxel_size must be >= 0 metres"},
+      {"align_budget_past_2_32",  // a budget no machine holds gave std::bad_alloc
+       [] {
+         align(object(), object(),
+               with([](AlignParams& p) { p.limits.max_voxels = std::size_t{1} << 33; }));
+       },
+       "max_voxels must be <= 2^32"},
+      {"phase_correlation_budget_past_2_32",
+       [] {
+         PhaseCorrelationParams params;
+         params.limits.max_voxels = std::size_t{1} << 33;
+         PhaseCorrelation(spec_of(8), params);
+       },
+       "max_voxels must be <= 2^32"},
       {"align_bandwidth",
        [] { align(object(), object(), with([](AlignParams& p) { p.scene.bandwidth = 65; })); },
        "bandwidth must be in [2, 64]"},

@@ -83,6 +83,7 @@ void check_align_params(const AlignParams& p) {
   check(p.search);
   check(p.refinement);
   check(p.verification);
+  check_grid_limits(p.limits);
   if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
   if (!(p.max_seconds >= 0.0 && std::isfinite(p.max_seconds))) {
     fail("max_seconds must be >= 0 seconds (0: no limit), got ", p.max_seconds);

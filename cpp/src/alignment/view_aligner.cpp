@@ -104,6 +104,7 @@ constexpr std::size_t kMaxViewAlternatives = 3;
 constexpr double kApartRadians = 5.0 * M_PI / 180.0;
 
 void check_params(const ViewAlignParams& p) {
+  check_grid_limits(p.limits);
   if (!(p.voxel_size >= 0.0 && std::isfinite(p.voxel_size)))
     fail("voxel_size must be >= 0 metres (0: derived from the views), got ", p.voxel_size);
   if (!(p.search_voxel_size >= 0.0 && std::isfinite(p.search_voxel_size)))

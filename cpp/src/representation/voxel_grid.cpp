@@ -46,6 +46,14 @@ int fft_friendly_size(int n) {
   }
 }
 
+void check_grid_limits(const GridLimits& limits) {
+  if (limits.max_voxels < 1) fail("max_voxels must be >= 1 (a voxel budget), got 0");
+  if (limits.max_voxels > kMaxGridBudget) {
+    fail("max_voxels must be <= 2^32 = ", kMaxGridBudget, " (a 16 GB grid), got ",
+         limits.max_voxels);
+  }
+}
+
 namespace {
 
 void check_spec(const GridSpec& spec, const GridLimits& limits) {
@@ -168,6 +176,7 @@ void reset(VoxelGrid& grid, const GridSpec& spec) {
 
 void voxelize_into(const Points& points, const GridSpec& spec, Occupancy occupancy, VoxelGrid& grid,
                    const GridLimits& limits) {
+  check_grid_limits(limits);  // a grid is allocated here; make_grid_spec allocates none
   check_spec(spec, limits);
   reset(grid, spec);
   for (Eigen::Index i = 0; i < points.rows(); ++i) {

@@ -441,6 +441,7 @@ PhaseCorrelation::PhaseCorrelation(const GridSpec& spec, const PhaseCorrelationP
   }
   if (params.threads < 1 || params.threads > 256)
     fail("threads must be in [1, 256], got ", params.threads);
+  check_grid_limits(params.limits);
   const double voxels = double(spec.dims.x()) * double(spec.dims.y()) * double(spec.dims.z());
   if (voxels > double(params.limits.max_voxels)) {
     fail("spec: a phase correlation grid of ", spec.dims.x(), " x ", spec.dims.y(), " x ",

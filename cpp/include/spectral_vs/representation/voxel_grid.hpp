@@ -58,6 +58,15 @@ struct GridLimits {
   std::size_t max_voxels = std::size_t{256} * 256 * 256;
 };
 
+/// The largest budget: 2^32 voxels, a 16 GB grid of floats, more than the FFT buffers
+/// beside it leave of most machines (a larger one gave std::bad_alloc, not an error).
+inline constexpr std::size_t kMaxGridBudget = std::size_t{1} << 32;
+
+/// @throws std::invalid_argument unless 1 <= limits.max_voxels <= kMaxGridBudget. Every
+/// call that allocates a grid (voxelize, PhaseCorrelation, align, align_views) checks them
+/// first; make_grid_spec, which allocates none, takes any budget.
+void check_grid_limits(const GridLimits& limits);
+
 /// Smallest transform length n' >= n on which FFTW's estimated (deterministic) plans are
 /// fast: a measured table up to 1024 (lengths such as 16, 20, 32, 48, 64, 80, 100, 128;
 /// not 60 or 96, which took twice the time per voxel of 64 or 100), then the even
