@@ -1,4 +1,4 @@
-"""Bit-for-bit fingerprints of the aligner's poses, to check that a change of structure
+"""Bit-for-bit fingerprints of the aligner's poses and verdicts, to check that a change of structure
 changes no result.
 
 Runs ``align`` in its two modes (the global search with the scan's viewpoint, and the
@@ -6,7 +6,8 @@ paper's gradient ascent) and the servo's prepared reference (``ModelAligner`` wi
 bounded translation) on seeded cases of every family of ``benchmarks/cases.py``, and
 ``align_views`` on seeded view pairs of the real scans (``spectral_vs.data.view_pairs``
 of ``../shared/data``, 320 x 240, searched and from a prior pose), and writes each
-returned pose as the hexadecimal form of its 16 doubles::
+returned pose as the hexadecimal form of its 16 doubles, with the fitness (views: the
+support's score), the verdict's score and confidence, and the status::
 
     python benchmarks/pose_fingerprint.py --output before.json      # on the old code
     python benchmarks/pose_fingerprint.py --compare before.json     # on the new code
@@ -39,6 +40,19 @@ def fingerprint(T: np.ndarray) -> list[str]:
     return [float(v).hex() for v in np.asarray(T, dtype=float).ravel()]
 
 
+def verdict(result) -> list[str]:
+    """The pose and what the verification said of it: its fitness, score, confidence and
+    status (a result of ``align`` or ``align_views``)."""
+    T = getattr(result, "T_scene_model", None)
+    if T is None:
+        T = result.T_current_reference
+    fitness = getattr(result, "fitness", None)
+    if fitness is None:
+        fitness = result.support.score
+    figures = [float(v).hex() for v in (fitness, result.score, result.confidence)]
+    return fingerprint(T) + figures + [str(result.status)]
+
+
 def poses(cases_per_cell: int) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for spec in case_lib.case_specs(case_lib.FAMILIES, ANGLES, cases_per_cell):
@@ -46,9 +60,9 @@ def poses(cases_per_cell: int) -> dict[str, list[str]]:
         model, scene = case.model_cloud(), case.scene_cloud()
         single_view = bool(np.all(np.isfinite(case.viewpoint)))
         ours = {"sensor_origin": case.viewpoint, "scene_view": "single_view"} if single_view else {}
-        out[f"{spec.case_id}/ours"] = fingerprint(svs.align(model, scene, **ours).T_scene_model)
+        out[f"{spec.case_id}/ours"] = verdict(svs.align(model, scene, **ours))
         paper = svs.align(model, scene, global_search=False, max_iterations=30)
-        out[f"{spec.case_id}/paper"] = fingerprint(paper.T_scene_model)
+        out[f"{spec.case_id}/paper"] = verdict(paper)
         # The servo's registration: the reference prepared once, a bounded translation.
         params = svs.AlignParams()
         params.global_search = False
@@ -56,7 +70,7 @@ def poses(cases_per_cell: int) -> dict[str, list[str]]:
         params.max_iterations = 10
         aligner = ModelAligner(svs.voxel_downsample(model, 0.004), params)
         bounded = aligner.align(svs.voxel_downsample(scene, 0.004), case.T_true)
-        out[f"{spec.case_id}/bounded"] = fingerprint(bounded.T_scene_model)
+        out[f"{spec.case_id}/bounded"] = verdict(bounded)
     return out
 
 
@@ -71,7 +85,7 @@ def view_poses(pairs_per_scan: int) -> dict[str, list[str]]:
             searched = svs.align_views(
                 pair.reference, pair.current, sensor_origin=pair.current_viewpoint
             )
-            out[f"{key}/search"] = fingerprint(searched.T_current_reference)
+            out[f"{key}/search"] = verdict(searched)
             prior = svs.align_views(
                 pair.reference,
                 pair.current,
@@ -80,7 +94,7 @@ def view_poses(pairs_per_scan: int) -> dict[str, list[str]]:
                 refinements=2,
                 prior=pair.T_current_reference,
             )
-            out[f"{key}/prior"] = fingerprint(prior.T_current_reference)
+            out[f"{key}/prior"] = verdict(prior)
     return out
 
 

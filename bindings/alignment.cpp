@@ -369,15 +369,17 @@ inlier_rmse : float
 inlier_fraction : float
     inliers / model points (Open3D's ``fitness`` with max distance d).
 visible : int
-    Model points the sensor would see: facing the viewpoint, in view and not behind a
-    scene surface nearer than d (all points without a viewpoint).
+    Model points the sensor would see: facing the viewpoint, in view and not more than
+    2 voxels behind the scanned surface (all points without a viewpoint).
 tight : int
-    Visible points within a quarter voxel of a scene point whose normal is within 45
-    degrees of theirs.
+    Visible points within half a voxel of the tangent plane of their nearest scene point
+    within 2 voxels whose normal is within 45 degrees of theirs.
 seen_through : int
-    Visible points more than d in front of the scanned surface (0 without a viewpoint).
+    Visible points more than 2 voxels in front of the scanned surface and no inlier,
+    where the sensor saw through them (0 without a viewpoint).
 hidden : int
-    Points facing the viewpoint, in view, behind a scene surface nearer by more than d.
+    Points facing the viewpoint, in view, more than 2 voxels behind the scanned surface:
+    neither confirmed nor refuted (0 without a viewpoint).
 confidence : float
     tight / visible * (1 - seen_through / visible), in [0, 1].
 )doc")
@@ -444,6 +446,48 @@ the residuals' variance, an inflation calibrated on the calibration set, and a w
 that keeps unconstrained directions finite (docs/trust.md).
 )doc");
 
+  py::class_<AlignTimings>(m, "AlignTimings",
+                           "Where the time of one align() went, by stage, seconds of the wall "
+                           "clock (with threads=1, its CPU time).")
+      .def_readonly("preparation", &AlignTimings::preparation,
+                    "The scene as searched (support plane out), the EGIs and their correlation, "
+                    "the single-view detection, the model's flat axis.")
+      .def_readonly("rotation_search", &AlignTimings::rotation_search,
+                    "The SO(3) searches of the hypotheses.")
+      .def_readonly("placement", &AlignTimings::placement,
+                    "The hypotheses placed by phase correlation and ranked by the "
+                    "verification's screen.")
+      .def_readonly("algorithm1", &AlignTimings::algorithm1,
+                    "Algorithm 1 from each refined hypothesis (or the guess), the sweeps and "
+                    "the polish.")
+      .def_readonly("icp", &AlignTimings::icp, "The ICP refinement of the refined hypotheses.")
+      .def_readonly("alternatives", &AlignTimings::alternatives,
+                    "The check of the pose, the alternatives, the reselection, the resting "
+                    "poses.")
+      .def_readonly("verdict", &AlignTimings::verdict,
+                    "The verdict: covariance, symmetries, calibration.")
+      .def_readonly("total", &AlignTimings::total, "The whole call.")
+      .def(
+          "as_dict",
+          [](const AlignTimings& t) {
+            py::dict d;
+            d["preparation"] = t.preparation;
+            d["rotation_search"] = t.rotation_search;
+            d["placement"] = t.placement;
+            d["algorithm1"] = t.algorithm1;
+            d["icp"] = t.icp;
+            d["alternatives"] = t.alternatives;
+            d["verdict"] = t.verdict;
+            d["total"] = t.total;
+            return d;
+          },
+          "The stages' seconds by name, in the order they run, and the total.")
+      .def("__repr__", [](const AlignTimings& t) {
+        std::ostringstream out;
+        out << "AlignTimings(total=" << t.total << ")";
+        return out.str();
+      });
+
   py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
       .def_property_readonly(
           "T_scene_model", [](const AlignResult& r) { return Eigen::Matrix4d(r.T_scene_model); },
@@ -490,6 +534,7 @@ that keeps unconstrained directions finite (docs/trust.md).
       .def_readonly("single_view", &AlignResult::single_view,
                     "True when the scene was checked as a single view from sensor_origin "
                     "(declared, or detected by detect_single_view).")
+      .def_readonly("timings", &AlignResult::timings, "Where the time went (AlignTimings).")
       .def_readonly("reliable", &AlignResult::reliable,
                     "The verdict: True when status is 'reliable' (confidence at least "
                     "RELIABLE_CONFIDENCE, no alternative as good, the search finished in time, "

@@ -15,7 +15,7 @@ void define_model_aligner(py::module_& m) {
       .def_readonly("scene_coefficients", &ModelAlignerTimings::scene_coefficients,
                     "The scene's EGI coefficients and the correlation's set-up.")
       .def_readonly("scene_map", &ModelAlignerTimings::scene_map,
-                    "The scene's voxel map of normal directions (for fitness).")
+                    "The verification's set-up: the extent of its voxel screen.")
       .def_readonly("translation_grid", &ModelAlignerTimings::translation_grid,
                     "Grid spec, FFT plans when its size changed, the scene's voxels and spectrum.")
       .def_readonly("rotation", &ModelAlignerTimings::rotation,
@@ -24,7 +24,8 @@ void define_model_aligner(py::module_& m) {
                     "The model's voxels and the phase correlation.")
       .def_readonly("records", &ModelAlignerTimings::records,
                     "J_t and J_r of the iteration records.")
-      .def_readonly("fitness", &ModelAlignerTimings::fitness, "Fitness and final correlation.")
+      .def_readonly("fitness", &ModelAlignerTimings::fitness,
+                    "The verification's fitness and check of the result, and the verdict.")
       .def_readonly("total", &ModelAlignerTimings::total, "The whole call.")
       .def("__repr__", [](const ModelAlignerTimings& t) {
         std::ostringstream out;

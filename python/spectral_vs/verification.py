@@ -50,7 +50,7 @@ def verify_pose(
         The pose to check: a rigid transform mapping model coordinates into the scene.
     voxel_size : float
         The alignment's voxel edge, metres: the inlier distance d is one voxel, the tight
-        distance a quarter of one. 0 (default): derived from the clouds as ``align``
+        distance half of one. 0 (default): derived from the clouds as ``align``
         derives it (:func:`alignment_voxel_size`).
     sensor_origin : array_like (3,)
         The scene's sensor, metres: estimated normals point toward it, and in a single

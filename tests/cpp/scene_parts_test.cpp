@@ -9,6 +9,7 @@
 #include "alignment/resting.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/scene_preparation.hpp"
+#include "alignment/verifier.hpp"
 #include "test_support.hpp"
 
 #include <spectral_vs/rotation/so3.hpp>
@@ -73,6 +74,23 @@ TEST_F(ViewOfAWall, ASurfaceOnTheWallIsConfirmed) {
   EXPECT_EQ(check.contradicted, 0);
   EXPECT_EQ(check.hidden, 0);
   EXPECT_DOUBLE_EQ(check.fitness(), 1.0);
+}
+
+// The verification's screen of a single view is the pixel check at half-voxel pixels: a
+// surface on the wall fits, one in front of it (seen through) does not.
+TEST_F(ViewOfAWall, TheVerificationScreensAViewByItsPixels) {
+  const double voxel = 0.008;
+  const Verifier verifier(wall, voxel, Eigen::Vector3d::Zero());
+  const RangeImage half_voxel(wall, Eigen::Vector3d::Zero(), 0.5 * voxel);
+  for (const double depth : {1.003, 0.95}) {
+    const PointCloud model = patch(0.05, -0.02, depth, 0.05, 0.003, kToSensor);
+    const double expected = half_voxel.check(model.points(), model.normals(), voxel).fitness();
+    EXPECT_EQ(verifier.fitness(model.points(), model.normals(), voxel), expected);
+  }
+  const PointCloud on_wall = patch(0.05, -0.02, 1.003, 0.05, 0.003, kToSensor);
+  EXPECT_DOUBLE_EQ(verifier.fitness(on_wall.points(), on_wall.normals(), voxel), 1.0);
+  const PointCloud in_front = patch(0.05, -0.02, 0.95, 0.05, 0.003, kToSensor);
+  EXPECT_DOUBLE_EQ(verifier.fitness(in_front.points(), in_front.normals(), voxel), 0.0);
 }
 
 TEST_F(ViewOfAWall, ASurfaceInFrontOfTheWallIsContradicted) {
@@ -418,7 +436,7 @@ TEST(TranslationWindow, OnAnAxisNarrowerInTheSceneHoldsOnlyTheScene) {
   const PointCloud model = test::box_and_sphere(6000, rng);
   const Eigen::Vector3d shift(0.031, -0.017, 0.012);
   const PointCloud scene = model.transformed(test::translation(shift));
-  const SceneMap map(scene, scene, 0.01, GridLimits{});
+  const SceneMap map(scene);
   const double reach = 0.2, margin = 0.05, voxel = 0.01;
   const Eigen::Vector3d centre = scene.centroid();
   TranslationWindow window(map, reach, margin, centre, voxel, Occupancy::trilinear,
@@ -450,7 +468,7 @@ TEST(TranslationWindow, CountsModelPointsPastTheWindowInTheOverlap) {
       model.row(400 + 20 * i + j) = p + Eigen::RowVector3d(0.0, 0.0, 0.3);
     }
   const PointCloud scene(patch);
-  const SceneMap map(scene, scene, voxel, GridLimits{});
+  const SceneMap map(scene);
   TranslationWindow window(map, 0.3, 0.05, Eigen::Vector3d(0.1, 0.1, 0.005), voxel,
                            Occupancy::binary, PhaseCorrelationParams{}, GridLimits{});
   EXPECT_NEAR(window.overlap(patch), 1.0, 1e-9);
@@ -502,8 +520,8 @@ double brute_force_fitness(const PointCloud& scene, const GridSpec& spec, const 
   return double(count) / double(supported.size());
 }
 
-// The one fitness, recorded over the whole scene (align()'s SceneMap) or around the model
-// only (ModelAligner), against the definition: the box and ball placed, moved half a
+// The one fitness, recorded over the whole scene (align()'s verification) or around the
+// model only (ModelAligner's), against the definition: the box and ball placed, moved half a
 // voxel, turned by 40 degrees, and reaching out of the scene's grid.
 TEST(Fitness, IsTheShareOfModelVoxelsWithAgreeingSceneNormalsNearby) {
   std::mt19937 rng(21);
@@ -516,9 +534,8 @@ TEST(Fitness, IsTheShareOfModelVoxelsWithAgreeingSceneNormalsNearby) {
   const PointCloud model = test::box_and_sphere(1500, rng);
   const double voxel = 0.01;
   const GridSpec spec = FitnessMap::spec_of(scene, voxel, GridLimits{});
-  const SceneMap whole(scene, scene, voxel, GridLimits{});
-  FitnessMap around;
-  around.set_scene(scene, spec, FitnessMap::Coverage::around_model);
+  const Verifier whole(scene, voxel, std::nullopt, spec);
+  const Verifier around(scene, voxel, std::nullopt, spec, FitnessMap::Coverage::around_model);
   Transform turned = Transform::Identity();
   turned.topLeftCorner<3, 3>() = exp_so3(Eigen::Vector3d(0.0, 0.0, 40.0 * M_PI / 180.0));
   const std::vector<Transform> poses = {Transform::Identity(),
@@ -528,15 +545,15 @@ TEST(Fitness, IsTheShareOfModelVoxelsWithAgreeingSceneNormalsNearby) {
   for (const Transform& pose : poses) {
     const PointCloud moved = model.transformed(pose);
     const double expected = brute_force_fitness(scene, spec, moved.points(), moved.normals());
-    EXPECT_EQ(whole.fitness(moved.points(), moved.normals()), expected);
-    EXPECT_EQ(around.fitness(moved.points(), moved.normals()), expected);
+    EXPECT_EQ(whole.fitness(moved.points(), moved.normals(), voxel), expected);
+    EXPECT_EQ(around.fitness(moved.points(), moved.normals(), voxel), expected);
     scores.push_back(expected);
   }
   EXPECT_GT(scores[0], 0.9);        // in place
   EXPECT_GT(scores[1], 0.9);        // half a voxel off: still within one voxel
   EXPECT_LT(scores[2], scores[0]);  // turned: the box's faces no longer agree
   EXPECT_LT(scores[3], 0.5);        // mostly outside the scene's grid
-  EXPECT_EQ(around.fitness(Points(0, 3), Points(0, 3)), 0.0);
+  EXPECT_EQ(around.fitness(Points(0, 3), Points(0, 3), voxel), 0.0);
 }
 
 // The six faces of an axis-aligned box of the given sizes, centred at the origin, sampled

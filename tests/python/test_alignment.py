@@ -150,6 +150,34 @@ def test_iterations_are_timed():
     assert sum(seconds) < 10.0  # a bound that catches a unit error (ms for s), not a speed
 
 
+@pytest.mark.parametrize("global_search", [True, False])
+def test_the_stages_account_for_the_call(global_search):
+    """AlignResult.timings: every stage timed once, none negative, together the whole call
+    but for the settings' checks and the result's copies (consistency, not a speed)."""
+    rng = np.random.default_rng(13)
+    model, scene, _, _ = make_case(rng, 60)
+    result = svs.align(model, scene, global_search=global_search, downsample=False, threads=1)
+    stages = result.timings.as_dict()
+    total = stages.pop("total")
+    assert list(stages) == [
+        "preparation",
+        "rotation_search",
+        "placement",
+        "algorithm1",
+        "icp",
+        "alternatives",
+        "verdict",
+    ]
+    assert all(seconds >= 0.0 for seconds in stages.values())
+    assert 0.9 * total <= sum(stages.values()) <= total
+    searched = ("rotation_search", "placement")
+    if global_search:
+        assert all(stages[name] > 0.0 for name in ("preparation", *searched, "algorithm1"))
+    else:  # the paper's mode: Algorithm 1 from the guess, no search
+        assert all(stages[name] == 0.0 for name in (*searched, "icp"))
+        assert stages["algorithm1"] > 0.0
+
+
 def test_bad_search_settings_name_the_setting():
     rng = np.random.default_rng(13)
     model, scene, _, _ = make_case(rng, 10)

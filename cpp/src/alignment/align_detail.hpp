@@ -22,6 +22,11 @@ std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
 /// deprecated scene_viewpoint); none otherwise.
 std::optional<Eigen::Vector3d> declared_viewpoint(const AlignParams& params);
 
+/// Wall-clock seconds from `start` to now.
+inline double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
 /// The phase-correlation settings of the alignment's grids (sub-voxel, threads, limits).
 PhaseCorrelationParams phase_params(const AlignParams& params);
 

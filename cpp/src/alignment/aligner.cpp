@@ -43,19 +43,17 @@ struct Prepared {
                   : std::nullopt),
         searched(plane ? without_support_plane(scene, *plane, params.scene.voxel_size, band)
                        : scene),
-        scene_map(searched, scene, params.scene.voxel_size, params.limits),
+        scene_map(searched),
         model_coefficients(
             egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method)),
         scene_coefficients(
             egi_coefficients(searched, params.scene.bandwidth, params.scene.egi_method)),
         correlation(scene_coefficients, model_coefficients, params.scene.bandwidth, true),
-        view(single_view_image(scene, params)),
-        viewpoint(view ? std::optional<Eigen::Vector3d>(scene_sensor_origin(params))
-                       : std::nullopt) {
-    // The verification of the global search's poses and of the returned one.
-    if (params.verification.verify || params.search.global_search)
-      verifier.emplace(scene, params.scene.voxel_size, viewpoint);
-  }
+        viewpoint(single_view_origin(scene, params)),
+        // The whole scene, its support plane included: a pose that sinks the model into
+        // the table is no fit.
+        verifier(scene, params.scene.voxel_size, viewpoint,
+                 FitnessMap::spec_of(scene, params.scene.voxel_size, params.limits)) {}
   Prepared(const Prepared&) = delete;
   Prepared& operator=(const Prepared&) = delete;
 
@@ -63,11 +61,8 @@ struct Prepared {
   Problem problem(ScoredModel& moving, const AlignParams& params, double margin,
                   Clock::time_point deadline, std::optional<Eigen::Vector3d> flat_axis,
                   bool dense_model) const {
-    return Problem{scene_map,   view ? &*view : nullptr,
-                   moving,      model_coefficients,
-                   params,      margin,
-                   deadline,    flat_axis,
-                   dense_model, viewpoint};
+    return Problem{scene_map, verifier,  moving,      model_coefficients, params,  margin,
+                   deadline,  flat_axis, dense_model, viewpoint,          &timings};
   }
 
   const double band;  // of the support plane, metres
@@ -77,9 +72,9 @@ struct Prepared {
   const ShCoefficients model_coefficients;
   const ShCoefficients scene_coefficients;
   So3Correlation correlation;
-  const std::optional<RangeImage> view;
-  const std::optional<Eigen::Vector3d> viewpoint;
-  std::optional<Verifier> verifier;
+  const std::optional<Eigen::Vector3d> viewpoint;  // the sensor of a single view
+  const Verifier verifier;
+  mutable AlignTimings timings;  // added to by the stages through Problem::timings
 };
 
 // The paper's mode: Algorithm 1 from the initial guess, on the grid over the whole scene
@@ -89,6 +84,7 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
                              Clock::time_point deadline) {
   const Problem problem =
       prepared.problem(moving, params, window_margin(0.0, params), deadline, std::nullopt, true);
+  const Clock::time_point started = Clock::now();
   const Pose start = moving.pose_of(params.initial_guess);
   SceneTranslation whole_scene =
       params.local.max_translation > 0.0
@@ -103,9 +99,11 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
   AlignResult result =
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
                               source, params.local.max_iterations);
+  prepared.timings.algorithm1 = seconds_since(started);
   // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
+  const StageTimer timer(&prepared.timings, &AlignTimings::alternatives);
   if (params.verification.verify)
-    set_verification(result, prepared.verifier->verify(model, result.T_scene_model));
+    set_verification(result, prepared.verifier.verify(model, result.T_scene_model));
   return result;
 }
 
@@ -120,7 +118,7 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
     parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(),
                          params.scene.voxel_size, prepared.band);
     keep_parts_near_guess(problem, prepared.searched, parts);
-  } else if (prepared.view) {
+  } else if (prepared.viewpoint) {
     parts.push_back(whole_view(prepared.searched));
   }
   std::vector<Hypothesis> hypotheses;
@@ -189,8 +187,10 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
     // result is swept and refined before they are compared.
     if (params.refinement.polish && problem.flat_axis)
       sweep_result_about(problem, window, result, *problem.flat_axis);
-    if (params.refinement.icp_refinement && prepared.view)
+    if (params.refinement.icp_refinement && prepared.viewpoint) {
+      const StageTimer timer(problem.timings, &AlignTimings::icp);
       refine_with_icp(problem, model, scene, result);
+    }
     out_of_time = result.stop_reason == AlignStopReason::max_seconds || expired(problem);
     if (i == 0 || better(result, best)) best = std::move(result);
   }
@@ -204,7 +204,10 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
   // Without the ICP, which reaches past it at a fraction of its cost.
   if (params.refinement.polish && !params.refinement.icp_refinement)
     polish_result_rotation(problem, window, best);
-  if (params.refinement.icp_refinement) refine_with_icp(problem, model, scene, best);
+  if (params.refinement.icp_refinement) {
+    const StageTimer timer(problem.timings, &AlignTimings::icp);
+    refine_with_icp(problem, model, scene, best);
+  }
   return best;
 }
 
@@ -268,8 +271,7 @@ void adopt(const Problem& problem, Prepared& prepared, const AlignAlternative& c
   best.inliers = chosen.inliers;
   best.inlier_rmse = chosen.inlier_rmse;
   const Pose pose = problem.model.pose_of(best.T_scene_model);
-  best.fitness =
-      problem.model.fitness(problem.scene, problem.view, pose, problem.params.scene.voxel_size);
+  best.fitness = problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
   best.correlation = prepared.correlation.evaluate(pose.R).value;
   best.translation_peak = 0.0;
   best.converged = false;
@@ -349,18 +351,26 @@ bool rest_on_support(const Problem& problem, Prepared& prepared, const PointClou
 AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
                            const AlignParams& params, ScoredModel& moving, Prepared& prepared,
                            Clock::time_point deadline) {
+  AlignTimings& timings = prepared.timings;
+  Clock::time_point started = Clock::now();
   const double search_voxel = search_voxel_size(scene, moving.reach(), params);
   const std::optional<Eigen::Vector3d> axis =
       flat_axis(prepared.model_coefficients, params.scene.bandwidth);
   const bool dense = dense_for_polish(model.points(), params.scene.voxel_size);
   const Problem problem =
       prepared.problem(moving, params, window_margin(search_voxel, params), deadline, axis, dense);
+  timings.preparation += seconds_since(started);
+  started = Clock::now();
   std::optional<TranslationWindow> window;
   const std::vector<Hypothesis> hypotheses = hypotheses_of(problem, prepared, search_voxel, window);
+  timings.placement = seconds_since(started) - timings.rotation_search;
+  started = Clock::now();
   AlignResult best =
       refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), window);
+  timings.algorithm1 = seconds_since(started) - timings.icp;
+  const StageTimer timer(&timings, &AlignTimings::alternatives);
   best.search_voxel_size = search_voxel;
-  const Verifier& verifier = *prepared.verifier;
+  const Verifier& verifier = prepared.verifier;
   set_verification(best, verifier.verify(model, best.T_scene_model));
   if (best.stop_reason != AlignStopReason::max_seconds &&
       params.verification.max_alternatives > 0) {
@@ -396,19 +406,25 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   AlignParams params = given;
   if (params.scene.voxel_size == 0.0) params.scene.voxel_size = alignment_voxel_size(model, scene);
   ScoredModel moving(model);
+  const Clock::time_point started = Clock::now();
   Prepared prepared(model, scene, params, moving);
+  prepared.timings.preparation = seconds_since(started);
   AlignResult result = params.search.global_search
                            ? align_globally(model, scene, params, moving, prepared, deadline)
                            : align_from_guess(model, scene, params, moving, prepared, deadline);
   result.voxel_size = params.scene.voxel_size;
-  result.single_view = prepared.view.has_value();
-  // The last stage: the verdict (the verifier exists wherever a pose was verified).
-  if (prepared.verifier) {
-    judge(result, model, *prepared.verifier, typical_size(model.points()),
+  result.single_view = prepared.viewpoint.has_value();
+  // The last stage: the verdict, wherever a pose was verified.
+  const Clock::time_point judged = Clock::now();
+  if (params.verification.verify || params.search.global_search) {
+    judge(result, model, prepared.verifier, typical_size(model.points()),
           typical_size(scene.points()));
   } else {
     leave_unjudged(result);
   }
+  result.timings = prepared.timings;
+  result.timings.verdict = seconds_since(judged);
+  result.timings.total = seconds_since(started);
   return result;
 }
 

@@ -1,7 +1,6 @@
 #pragma once
-// Internal to the aligner: the fitness of a pose, the one implementation that align()
-// (through SceneMap, at many poses per scene) and ModelAligner (at one pose per scene)
-// both use.
+// Internal to the aligner: the verification's screen of a scene seen from all sides
+// (verifier.hpp), at many poses per scene (align()) or one (ModelAligner).
 
 #include <spectral_vs/representation/point_cloud.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>

@@ -76,8 +76,12 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
   So3SearchParams search;
   search.candidates = params.search.hypotheses;
   search.threads = params.threads;
-  const auto candidates =
-      so3_search(scene_coefficients, problem.model_coefficients, params.scene.bandwidth, search);
+  std::vector<RotationCandidate> candidates;
+  {
+    const StageTimer timer(problem.timings, &AlignTimings::rotation_search);
+    candidates =
+        so3_search(scene_coefficients, problem.model_coefficients, params.scene.bandwidth, search);
+  }
   const Eigen::Vector3d start = problem.scene.cloud().centroid();
   SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel,
                           params.scene.occupancy, phase_params(params), params.limits);
@@ -91,8 +95,7 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
     hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
     hypothesis.pose.offset = start - problem.model.centroid();
     hypothesis.pose.offset += coarse.estimate(problem.model.move(hypothesis.pose)).shift;
-    hypothesis.fitness =
-        problem.model.fitness(problem.scene, problem.view, hypothesis.pose, search_voxel);
+    hypothesis.fitness = problem.model.fitness(problem.verifier, hypothesis.pose, search_voxel);
     hypotheses.push_back(hypothesis);
   }
   rank(hypotheses);
@@ -126,13 +129,18 @@ std::vector<Eigen::Matrix3d> part_rotations(const Problem& problem,
   So3SearchParams search;
   search.candidates = (sparse ? kScreenedPerPlaced : kPartCandidateSurplus) * per_part;
   search.threads = problem.params.threads;
+  std::vector<RotationCandidate> candidates;
+  {
+    const StageTimer timer(problem.timings, &AlignTimings::rotation_search);
+    candidates = so3_search(coefficients, problem.model_coefficients,
+                            problem.params.scene.bandwidth, search);
+  }
   std::vector<std::pair<double, Eigen::Matrix3d>> scored;
-  for (const RotationCandidate& candidate : so3_search(coefficients, problem.model_coefficients,
-                                                       problem.params.scene.bandwidth, search)) {
+  for (const RotationCandidate& candidate : candidates) {
     double fitness = 0.0;
     if (sparse) {
       const Pose pose = placed_at_part(problem, *sparse, candidate.R, centroid, coarse);
-      fitness = sparse->fitness(problem.scene, problem.view, pose,
+      fitness = sparse->fitness(problem.verifier, pose,
                                 kCoarsePlacement * problem.params.scene.voxel_size);
     }
     scored.emplace_back(fitness, candidate.R);
@@ -199,8 +207,8 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       // Twice: the coarse shift brings the model near enough for the fine one to be exact.
       hypothesis.pose = placed_at_part(problem, problem.model, refined, centroid, *coarse);
       hypothesis.pose.offset += window->estimate(problem.model.move(hypothesis.pose)).shift;
-      hypothesis.fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
-                                                 params.scene.voxel_size);
+      hypothesis.fitness =
+          problem.model.fitness(problem.verifier, hypothesis.pose, params.scene.voxel_size);
       hypotheses.push_back(hypothesis);
     }
   }
@@ -219,7 +227,7 @@ void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypot
     for (int k = 1; k < turns; ++k) {
       Pose trial = start;
       trial.R = start.R * exp_so3(double(k) * kFlatAxisStep * *problem.flat_axis);
-      const double fitness = problem.model.fitness(problem.scene, problem.view, trial, tolerance);
+      const double fitness = problem.model.fitness(problem.verifier, trial, tolerance);
       if (fitness > hypothesis.fitness) {
         hypothesis.fitness = fitness;
         hypothesis.pose = trial;
@@ -255,7 +263,7 @@ void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses
   Hypothesis guess;
   guess.index = -1;
   guess.pose = problem.model.pose_of(params.initial_guess);
-  guess.fitness = problem.model.fitness(problem.scene, problem.view, guess.pose, tolerance);
+  guess.fitness = problem.model.fitness(problem.verifier, guess.pose, tolerance);
   const Eigen::Vector3d centre = problem.model.centre(guess.pose);
   const auto outside = [&](const Hypothesis& h) {
     return (params.search.guess_angle_deg > 0.0 &&

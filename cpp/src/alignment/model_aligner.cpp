@@ -6,9 +6,7 @@
 
 #include "alignment/algorithm1.hpp"
 #include "alignment/align_detail.hpp"
-#include "alignment/fitness_map.hpp"
 #include "alignment/moving_model.hpp"
-#include "alignment/range_image.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/verdict_detail.hpp"
@@ -34,11 +32,8 @@ using Clock = std::chrono::steady_clock;
 // (about 20 bytes per voxel each: 8 MB for a 0.4 M-voxel grid).
 constexpr std::size_t kKeptPlans = 3;
 
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
 using detail::Pose;
+using detail::seconds_since;
 
 }  // namespace
 
@@ -56,7 +51,6 @@ struct ModelAligner::Impl {
   // grid took 2-5 ms, as much as the step's two transforms).
   std::vector<PhaseCorrelation> kept_plans;
   VoxelGrid target, moving;
-  detail::FitnessMap fitness_map;
   ModelAlignerTimings timings;
   // Held by each align() for the whole call: calls from several threads share the
   // buffers above, so they run one at a time (guarded by ThreadSanitizer in threads_test).
@@ -69,18 +63,6 @@ struct ModelAligner::Impl {
   }
   Transform transform_of(const Pose& pose) const { return moving_model->transform_of(pose); }
   const Points& move(const Pose& pose) { return moving_model->move(pose); }
-
-  // The fitness as align() scores it, against the scene of fitness_map (set_scene) or,
-  // for a declared view, what the sensor saw of `scene`.
-  double fitness(const PointCloud& scene, const Pose& pose) {
-    const Points& normals = moving_model->turned_normals(pose);
-    const Points& points = move(pose);
-    const std::optional<Eigen::Vector3d> viewpoint = detail::declared_viewpoint(params);
-    if (!viewpoint) return fitness_map.fitness(points, normals);
-    const detail::RangeImage view(scene, *viewpoint,
-                                  0.5 * params.scene.voxel_size);  // as align() makes it
-    return view.check(points, normals, params.scene.voxel_size).fitness();
-  }
 
   // The scene's voxels and spectrum on the bounded grid around the model's start; the
   // FFT plans and buffers are kept while the grid's size stays the same.
@@ -151,9 +133,12 @@ struct ModelAligner::Impl {
                                true);
     timings.scene_coefficients = seconds_since(t);
     t = Clock::now();
-    // Built for the final pose only: the scene's directions around the model.
-    const GridSpec map = detail::FitnessMap::spec_of(scene, params.scene.voxel_size, params.limits);
-    fitness_map.set_scene(scene, map, detail::FitnessMap::Coverage::around_model);
+    // The verification, for the final pose only: the screen records the scene's
+    // directions around the model, or reads what a declared view's sensor saw.
+    const detail::Verifier verifier(
+        scene, params.scene.voxel_size, detail::declared_viewpoint(params),
+        detail::FitnessMap::spec_of(scene, params.scene.voxel_size, params.limits),
+        detail::FitnessMap::Coverage::around_model);
     timings.scene_map = seconds_since(t);
 
     t = Clock::now();
@@ -174,11 +159,10 @@ struct ModelAligner::Impl {
     timings.translation = loop_timings.translation;
     timings.records = loop_timings.records;
     t = Clock::now();
-    result.fitness = fitness(scene, pose);
+    result.fitness =
+        verifier.fitness(move(pose), moving_model->turned_normals(pose), params.scene.voxel_size);
     result.voxel_size = params.scene.voxel_size;
     if (params.verification.verify) {
-      const detail::Verifier verifier(scene, params.scene.voxel_size,
-                                      detail::declared_viewpoint(params));
       detail::set_verification(result, verifier.verify(model, result.T_scene_model));
       detail::judge(result, model, verifier, detail::typical_size(model.points()),
                     detail::typical_size(scene.points()));
@@ -219,6 +203,21 @@ AlignResult ModelAligner::align(const PointCloud& scene) {
   return align(scene, impl_->params.initial_guess);
 }
 
+namespace {
+
+// The local mode's stages as align()'s: the scene's side prepared, Algorithm 1, the
+// verification with the verdict.
+AlignTimings local_timings(const ModelAlignerTimings& t) {
+  AlignTimings timings;
+  timings.preparation = t.scene_coefficients + t.scene_map + t.translation_grid;
+  timings.algorithm1 = t.rotation + t.translation + t.records;
+  timings.verdict = t.fitness;
+  timings.total = t.total;
+  return timings;
+}
+
+}  // namespace
+
 AlignResult ModelAligner::align(const PointCloud& scene, const Transform& initial_guess) {
   Impl& im = *impl_;
   const std::lock_guard<std::mutex> lock(im.busy);
@@ -236,6 +235,7 @@ AlignResult ModelAligner::align(const PointCloud& scene, const Transform& initia
     result = spectral_vs::align(im.model, scene, params);
   }
   im.timings.total = seconds_since(started);
+  if (im.local()) result.timings = local_timings(im.timings);
   return result;
 }
 

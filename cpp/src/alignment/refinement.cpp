@@ -146,7 +146,7 @@ void polish_result(const Problem& problem, std::optional<TranslationWindow>& win
   const Pose polished = step(*window, start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
   result.fitness =
-      problem.model.fitness(problem.scene, problem.view, polished, problem.params.scene.voxel_size);
+      problem.model.fitness(problem.verifier, polished, problem.params.scene.voxel_size);
 }
 
 }  // namespace
@@ -168,8 +168,7 @@ AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& corr
   const Algorithm1Problem loop{correlation,   scene_coefficients, problem.model_coefficients,
                                problem.model, problem.params,     problem.deadline};
   AlignResult result = run_algorithm1(loop, pose, source, max_iterations);
-  result.fitness =
-      problem.model.fitness(problem.scene, problem.view, pose, problem.params.scene.voxel_size);
+  result.fitness = problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
   return result;
 }
 
@@ -198,8 +197,8 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   result.hypothesis = hypothesis.index;
   // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
   // walk off a right hypothesis: the fitter of the two poses is kept.
-  const double start_fitness = problem.model.fitness(problem.scene, problem.view, hypothesis.pose,
-                                                     problem.params.scene.voxel_size);
+  const double start_fitness =
+      problem.model.fitness(problem.verifier, hypothesis.pose, problem.params.scene.voxel_size);
   if (start_fitness > result.fitness) {
     // The returned pose is then not where this run ended: it claims no iterations.
     result.T_scene_model = problem.model.transform_of(hypothesis.pose);
@@ -243,9 +242,8 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
   const Transform& T_scene_model = icp.T_scene_model;
   const int iterations = icp.iterations;
   if (iterations == 0) return;
-  const double fitness =
-      problem.model.fitness(problem.scene, problem.view, problem.model.pose_of(T_scene_model),
-                            problem.params.scene.voxel_size);
+  const double fitness = problem.model.fitness(
+      problem.verifier, problem.model.pose_of(T_scene_model), problem.params.scene.voxel_size);
   if (fitness < result.fitness - kIcpFitnessLoss) return;
   result.T_scene_model = T_scene_model;
   result.fitness = fitness;

@@ -174,7 +174,7 @@ std::vector<Transform> resting_poses(const Problem& problem, const PointCloud& s
     for (const Eigen::Vector3d& face : faces) {
       for (const Eigen::Matrix3d& R : resting_rotations(face, plane.normal, kRestingTurns)) {
         const Pose pose = resting_at(problem, sparse, R, centroid, plane);
-        scored.emplace_back(sparse.fitness(problem.scene, problem.view, pose, voxel), R);
+        scored.emplace_back(sparse.fitness(problem.verifier, pose, voxel), R);
       }
     }
     std::stable_sort(scored.begin(), scored.end(),

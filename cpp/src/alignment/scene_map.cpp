@@ -134,17 +134,6 @@ GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const Gri
   return spec;
 }
 
-SceneMap::SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
-                   const GridLimits& limits)
-    : scene_(&scene) {
-  fitness_.set_scene(evidence, scene_map_spec(evidence, voxel_size, limits),
-                     FitnessMap::Coverage::whole_scene);
-}
-
-double SceneMap::fitness(const Points& points, const Points& normals) const {
-  return fitness_.fitness(points, normals);
-}
-
 std::vector<Eigen::Index> SceneMap::points_in(const Eigen::AlignedBox3d& box) const {
   std::vector<Eigen::Index> rows;
   const Points& p = scene_->points();

@@ -7,7 +7,6 @@
 #include <spectral_vs/translation/phase_correlation.hpp>
 
 #include "alignment/algorithm1.hpp"
-#include "alignment/fitness_map.hpp"
 
 #include <Eigen/Geometry>
 #include <array>
@@ -43,7 +42,8 @@ int voxels_along(double length, double voxel_size, const GridLimits& limits);
 /// degrees of it together with the nearest.
 int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullptr);
 
-/// The grid of SceneMap over `evidence`: its box and two voxels on each side.
+/// The grid of the verification's voxel screen (FitnessMap) over `evidence`: its box and
+/// two voxels on each side.
 /// @throws std::invalid_argument over limits.max_voxels.
 GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const GridLimits& limits);
 
@@ -69,30 +69,20 @@ Points points_in_reach(const Points& scene, const Eigen::AlignedBox3d& model_box
 /// The box of a non-empty set of points.
 Eigen::AlignedBox3d points_box(const Points& points);
 
-/// The scene as align() queries it: the fitness of a pose (FitnessMap over the whole
-/// scene, recorded once) and the scene points near a place, for windows.
+/// The scene as align() searches it: the scene points near a place, for windows (the
+/// fitness of a pose is the verification's, verifier.hpp).
 class SceneMap {
  public:
-  /// `scene` is searched and windowed; `evidence` (the whole scene, or the same cloud)
-  /// scores fitness; both must outlive the map. @throws std::invalid_argument if the map
-  /// exceeds `limits`.
-  SceneMap(const PointCloud& scene, const PointCloud& evidence, double voxel_size,
-           const GridLimits& limits);
+  /// `scene` is searched and windowed; it must outlive the map.
+  explicit SceneMap(const PointCloud& scene) : scene_(&scene) {}
 
   const PointCloud& cloud() const { return *scene_; }
-
-  /// FitnessMap::fitness against `evidence`: fraction of the occupied voxels of `points`
-  /// that lie within one voxel of a scene point whose normal is within about 50 degrees
-  /// of theirs, in [0, 1]. The normals keep a model lying flat on a table, or turned
-  /// inside out, from scoring as a fit.
-  double fitness(const Points& points, const Points& normals) const;
 
   /// Indices of the scene points inside the axis-aligned box.
   std::vector<Eigen::Index> points_in(const Eigen::AlignedBox3d& box) const;
 
  private:
   const PointCloud* scene_;
-  mutable FitnessMap fitness_;  // its buffers are scratch: fitness() is const
 };
 
 /// A cubic window of the scene around the model, on a grid only as large as the window:

@@ -134,16 +134,14 @@ Eigen::Vector3d scene_sensor_origin(const AlignParams& params) {
   return scene_sensor(params).origin;
 }
 
-// The range image of a single view (half-voxel pixels: a model point a voxel in front of
-// or behind the scan is resolved), or none for a scene seen from all sides or one that
-// the detection does not find to be a single view.
-std::optional<RangeImage> single_view_image(const PointCloud& scene, const AlignParams& params) {
+std::optional<Eigen::Vector3d> single_view_origin(const PointCloud& scene,
+                                                  const AlignParams& params) {
   const SceneSensor sensor = scene_sensor(params);
   if (sensor.view == SceneView::all_sides) return std::nullopt;
   if (sensor.view == SceneView::automatic &&
       !detect_single_view(scene, sensor.origin, params.scene.voxel_size).single_view)
     return std::nullopt;
-  return RangeImage(scene, sensor.origin, 0.5 * params.scene.voxel_size);
+  return sensor.origin;
 }
 
 }  // namespace detail

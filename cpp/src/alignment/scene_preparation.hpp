@@ -5,7 +5,6 @@
 
 #include <spectral_vs/alignment/aligner.hpp>
 
-#include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/stages.hpp"
 
@@ -41,9 +40,10 @@ std::vector<Eigen::Index> whole_view(const PointCloud& searched);
 void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
                            std::vector<std::vector<Eigen::Index>>& parts);
 
-/// The range image of a single view, or none (a scene seen from all sides, declared or
+/// The sensor origin of a single view, or none (a scene seen from all sides, declared or
 /// detected).
-std::optional<RangeImage> single_view_image(const PointCloud& scene, const AlignParams& params);
+std::optional<Eigen::Vector3d> single_view_origin(const PointCloud& scene,
+                                                  const AlignParams& params);
 
 /// The sensor origin of the scene as the settings give it (sensor_origin, or the
 /// deprecated scene_viewpoint).

@@ -5,7 +5,8 @@
 //   hypotheses         the SO(3) search (global or per part), placement, ranking;
 //   refinement         Algorithm 1 from each hypothesis, the flat-axis sweep, the polish,
 //                      the ICP;
-//   verifier           the one score of a pose (fitness, confidence, inliers);
+//   verifier           the one verification: the screen that ranks poses (fitness)
+//                      and the check behind the verdict (confidence, inliers);
 //   alternatives       the other poses the scene supports about as well;
 //   reselect           an alternative replaces the pose: one far more confident, one
 //                      that explains its object's part whole (part_coverage), or one
@@ -13,9 +14,10 @@
 
 #include <spectral_vs/alignment/aligner.hpp>
 
+#include "alignment/align_detail.hpp"
 #include "alignment/moving_model.hpp"
-#include "alignment/range_image.hpp"
 #include "alignment/scene_map.hpp"
+#include "alignment/verifier.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -33,17 +35,15 @@ using Clock = std::chrono::steady_clock;
 constexpr double kFlatAxisRatio = 0.1;
 constexpr double kFlatAxisStep = 15.0 * M_PI / 180.0;  // turns tried about the flat axis
 
-// The moving model scored against the scene: against what its sensor saw, with depths
-// within `tolerance` metres, when the scene is one view.
+// The moving model scored by the verification's screen: against what its sensor saw,
+// with depths within `tolerance` metres, when the scene is one view.
 class ScoredModel : public MovingModel {
  public:
   using MovingModel::MovingModel;
 
-  double fitness(const SceneMap& scene, const RangeImage* view, const Pose& pose,
-                 double tolerance) {
+  double fitness(const Verifier& verifier, const Pose& pose, double tolerance) {
     const Points& normals = turned_normals(pose);
-    const Points& moved = move(pose);
-    return view ? view->check(moved, normals, tolerance).fitness() : scene.fitness(moved, normals);
+    return verifier.fitness(move(pose), normals, tolerance);
   }
 };
 
@@ -52,7 +52,7 @@ class ScoredModel : public MovingModel {
 // and moves to a window once the translation steps fit in it.
 struct Problem {
   const SceneMap& scene;
-  const RangeImage* view;  // the scene's range image, for a single view
+  const Verifier& verifier;  // scores poses against the whole scene (its sensor's view)
   ScoredModel& model;
   const ShCoefficients& model_coefficients;
   const AlignParams& params;
@@ -61,6 +61,23 @@ struct Problem {
   std::optional<Eigen::Vector3d> flat_axis = std::nullopt;  // of the model's EGI, if it has one
   bool dense_model = true;  // at least kPolishMinDensity points per occupied voxel
   std::optional<Eigen::Vector3d> viewpoint = std::nullopt;  // the sensor of a single view
+  AlignTimings* timings = nullptr;                          // where the stages add their time
+};
+
+// Adds the wall-clock seconds of its scope to one field of `timings` (none: nothing).
+class StageTimer {
+ public:
+  StageTimer(AlignTimings* timings, double AlignTimings::*field)
+      : into_(timings ? &(timings->*field) : nullptr), start_(Clock::now()) {}
+  ~StageTimer() {
+    if (into_) *into_ += seconds_since(start_);
+  }
+  StageTimer(const StageTimer&) = delete;
+  StageTimer& operator=(const StageTimer&) = delete;
+
+ private:
+  double* into_;
+  Clock::time_point start_;
 };
 
 /// The time limit of params.max_seconds has passed.

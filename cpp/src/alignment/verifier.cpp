@@ -22,19 +22,62 @@ Eigen::AlignedBox3d grown_box(const PointCloud& scene, double margin) {
 
 }  // namespace
 
-// Pixels of the verifier's range image, in voxels: coarser than the aligner's half-voxel
-// ones, so that a sparse real scan (about one point per voxel) leaves no holes that a
-// model point would be seen through.
+// Pixels of the verification's range image, in voxels: coarser than the screen's
+// half-voxel ones, so that a sparse real scan (about one point per voxel) leaves no holes
+// that a model point would be seen through.
 constexpr double kPixelVoxels = 1.0;
+// Pixels of the screen's range image, in voxels: a model point a voxel in front of or
+// behind the scan is resolved.
+constexpr double kScreenPixelVoxels = 0.5;
 
 Verifier::Verifier(const PointCloud& scene, double voxel_size,
-                   const std::optional<Eigen::Vector3d>& viewpoint)
-    : voxel_size_(voxel_size),
-      grid_(scene, grown_box(scene, kVisibilityVoxels * voxel_size),
-            kVisibilityVoxels * voxel_size),
-      fine_grid_(scene, grown_box(scene, kVisibilityVoxels * voxel_size),
-                 kInlierVoxels * voxel_size) {
-  if (viewpoint) view_.emplace(scene, *viewpoint, kPixelVoxels * voxel_size);
+                   const std::optional<Eigen::Vector3d>& viewpoint,
+                   const std::optional<GridSpec>& screen, FitnessMap::Coverage coverage)
+    : scene_(&scene),
+      voxel_size_(voxel_size),
+      viewpoint_(viewpoint),
+      screen_spec_(screen),
+      coverage_(coverage) {}
+
+double Verifier::fitness(const Points& points, const Points& normals, double tolerance) const {
+  if (viewpoint_) return check(points, normals, tolerance).fitness();
+  if (!map_) {
+    map_.emplace();
+    map_->set_scene(*scene_,
+                    screen_spec_ ? *screen_spec_ : FitnessMap::spec_of(*scene_, voxel_size_, {}),
+                    coverage_);
+  }
+  return map_->fitness(points, normals);
+}
+
+ViewCheck Verifier::check(const Points& points, const Points& normals, double tolerance,
+                          RangeImage::Distance distance) const {
+  return screen_image().check(points, normals, tolerance, distance);
+}
+
+const RangeImage& Verifier::screen_image() const {
+  if (!viewpoint_) fail("Verifier: a pixel check needs the scene's viewpoint");
+  if (!screen_image_) screen_image_.emplace(*scene_, *viewpoint_, kScreenPixelVoxels * voxel_size_);
+  return *screen_image_;
+}
+
+const RangeImage& Verifier::verify_image() const {
+  if (!verify_image_) verify_image_.emplace(*scene_, *viewpoint_, kPixelVoxels * voxel_size_);
+  return *verify_image_;
+}
+
+const IcpScene& Verifier::grid() const {
+  if (!grid_)
+    grid_.emplace(*scene_, grown_box(*scene_, kVisibilityVoxels * voxel_size_),
+                  kVisibilityVoxels * voxel_size_);
+  return *grid_;
+}
+
+const IcpScene& Verifier::fine_grid() const {
+  if (!fine_grid_)
+    fine_grid_.emplace(*scene_, grown_box(*scene_, kVisibilityVoxels * voxel_size_),
+                       kInlierVoxels * voxel_size_);
+  return *fine_grid_;
 }
 
 PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) const {
@@ -44,14 +87,17 @@ PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) c
   const double margin = kVisibilityVoxels * voxel_size_;
   const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
   const Eigen::Vector3d t = T.topRightCorner<3, 1>();
-  const Points& scene_points = grid_.cloud().points();
-  const Points& scene_normals = grid_.cloud().normals();
+  const IcpScene& grid = this->grid();
+  const IcpScene& fine_grid = this->fine_grid();
+  const RangeImage* view = viewpoint_ ? &verify_image() : nullptr;
+  const Points& scene_points = grid.cloud().points();
+  const Points& scene_normals = grid.cloud().normals();
   double squared_sum = 0.0;
   const Eigen::Index n = model.points().rows();
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Vector3d p = R * model.points().row(i).transpose() + t;
     const Eigen::Vector3d normal = R * model.normals().row(i).transpose();
-    const Eigen::Index nearest = fine_grid_.nearest(p, normal, v.inlier_distance, -2.0);
+    const Eigen::Index nearest = fine_grid.nearest(p, normal, v.inlier_distance, -2.0);
     double distance = INFINITY;
     if (nearest >= 0) {
       distance = (scene_points.row(nearest).transpose() - p).norm();
@@ -60,9 +106,9 @@ PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) c
     }
     bool visible = true;
     double gap = 0.0;
-    if (view_) {
-      gap = view_->depth_gap(p);
-      const bool facing = normal.dot(view_->viewpoint() - p) > 0.0 && !std::isnan(gap);
+    if (view) {
+      gap = view->depth_gap(p);
+      const bool facing = normal.dot(*viewpoint_ - p) > 0.0 && !std::isnan(gap);
       visible = facing && gap >= -margin;
       if (facing && !visible) ++v.hidden;
     }
@@ -71,7 +117,7 @@ PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) c
     if (gap > margin && distance > v.inlier_distance) ++v.seen_through;
     // Point to plane: two samplings of one surface are half a sample spacing apart along
     // it, not across it.
-    const Eigen::Index agreeing = grid_.nearest(p, normal, margin, kTightCosine);
+    const Eigen::Index agreeing = grid.nearest(p, normal, margin, kTightCosine);
     if (agreeing >= 0 && std::abs(scene_normals.row(agreeing).dot(
                              p - scene_points.row(agreeing).transpose())) <= tight)
       ++v.tight;

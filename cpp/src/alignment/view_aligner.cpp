@@ -256,10 +256,9 @@ PointCloud structure(const PointCloud& view, const PlaneBalance& balance) {
 // Stage: verification. The reference at a pose against the current view's depth image.
 class SupportCheck {
  public:
-  /// `current` as prepared (its depth image), `reference`: what of the reference is checked.
-  SupportCheck(const PointCloud& current, const PointCloud& reference,
-               const ViewAlignParams& params, const ViewScale& scale)
-      : image_(current, params.sensor_origin, 0.5 * scale.voxel_size), voxel_(scale.voxel_size) {
+  /// `current`: the verification of the current view as prepared (its depth image),
+  /// `reference`: what of the reference is checked.
+  SupportCheck(const detail::Verifier& current, const PointCloud& reference) : current_(current) {
     const Eigen::Index count = reference.points().rows();
     const Eigen::Index stride = std::max<Eigen::Index>(1, count / kSupportPoints);
     std::vector<Eigen::Index> rows;
@@ -274,8 +273,9 @@ class SupportCheck {
     moved_.noalias() = points_ * R.transpose();
     moved_.rowwise() += T_current_reference.topRightCorner<3, 1>().transpose();
     turned_.noalias() = normals_ * R.transpose();
-    const detail::ViewCheck check = image_.check(moved_, turned_, tolerance * voxel_,
-                                                 detail::RangeImage::Distance::along_normal);
+    const detail::ViewCheck check =
+        current_.check(moved_, turned_, tolerance * current_.voxel_size(),
+                       detail::RangeImage::Distance::along_normal);
     ViewSupport support;
     support.confirmed = check.confirmed;
     support.contradicted = check.contradicted;
@@ -288,8 +288,7 @@ class SupportCheck {
   }
 
  private:
-  detail::RangeImage image_;
-  double voxel_;
+  const detail::Verifier& current_;
   Points points_, normals_, moved_, turned_;
 };
 
@@ -312,6 +311,7 @@ struct Views {
   const ShCoefficients& reference_coefficients;
   const ShCoefficients& current_coefficients;
   So3Correlation& correlation;
+  const detail::Verifier& verifier;  // of poses against the current view
   SupportCheck& support;
   const detail::IcpScene& coarse_scene;  // the current view at a voxel, cells of a search voxel
   const detail::IcpScene& fine_scene;    // the current view, cells of a voxel
@@ -571,7 +571,7 @@ class ViewVerdict {
   explicit ViewVerdict(const Views& views)
       : views_(views),
         sample_(every_nth(views.reference)),
-        verifier_(views.current, views.scale.voxel_size, views.params.sensor_origin),
+        verifier_(views.verifier),
         centroid_(sample_.centroid()) {}
 
   // The score of a pose (ViewAlignResult::score) and its verification.
@@ -687,7 +687,7 @@ class ViewVerdict {
 
   const Views& views_;
   PointCloud sample_;
-  detail::Verifier verifier_;
+  const detail::Verifier& verifier_;
   Eigen::Vector3d centroid_;
 };
 
@@ -725,8 +725,8 @@ ViewSupport view_support(const PointCloud& reference_view, const PointCloud& cur
   const ViewScale scale = scale_of(reference_view, current_view, params);
   const PointCloud current = prepared(current_view, params, scale.voxel_size);
   const PointCloud reference = prepared(reference_view, params, scale.voxel_size);
-  SupportCheck support(current, structure(reference, plane_balance(reference.normals())), params,
-                       scale);
+  const detail::Verifier verifier(current, scale.voxel_size, params.sensor_origin);
+  SupportCheck support(verifier, structure(reference, plane_balance(reference.normals())));
   return support.of(T_current_reference, kFineTolerance);
 }
 
@@ -745,13 +745,14 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
   const PointCloud reference_balanced = cropped(balanced(reference, reference_balance));
   const PointCloud current_balanced = cropped(balanced(current, plane_balance(current.normals())));
   detail::MovingModel model(reference_balanced);
-  const detail::SceneMap map(current_balanced, current_balanced, scale.voxel_size, params.limits);
+  const detail::SceneMap map(current_balanced);
   const ShCoefficients reference_coefficients =
       egi_coefficients(reference_balanced, params.bandwidth, params.egi_method);
   const ShCoefficients current_coefficients =
       egi_coefficients(current_balanced, params.bandwidth, params.egi_method);
   So3Correlation correlation(current_coefficients, reference_coefficients, params.bandwidth, true);
-  SupportCheck support(current, structure(reference, reference_balance), params, scale);
+  const detail::Verifier verifier(current, scale.voxel_size, params.sensor_origin);
+  SupportCheck support(verifier, structure(reference, reference_balance));
   // The ICP's neighbour grids, made once: cells as wide as the pairs' distance (wider
   // cells hold more points to try per query), the hypotheses' on the view at a voxel.
   Eigen::AlignedBox3d around = bounding_box(current);
@@ -771,6 +772,7 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
                     reference_coefficients,
                     current_coefficients,
                     correlation,
+                    verifier,
                     support,
                     coarse_scene,
                     fine_scene,

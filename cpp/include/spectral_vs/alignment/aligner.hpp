@@ -267,6 +267,29 @@ struct AlignAlternative {
   bool symmetric = false;
 };
 
+/// Where the time of one `align` went, by stage, seconds of the wall clock (with
+/// `threads = 1`, the call's CPU time). The stages sum to `total` but for the settings'
+/// checks and the result's copies. `ModelAligner::align` in its local mode fills
+/// preparation, algorithm1, verdict (the verification and the verdict) and total
+/// (`ModelAligner::last_timings` splits them further).
+struct AlignTimings {
+  /// The scene as searched (its support plane out), the EGIs of model and scene and their
+  /// correlation, the single-view detection, the model's flat axis.
+  double preparation = 0.0;
+  double rotation_search = 0.0;  ///< The SO(3) searches of the hypotheses (`so3_search`).
+  /// The hypotheses' rotations refined, placed by phase correlation and ranked by the
+  /// verification's screen; the turns about a flat axis.
+  double placement = 0.0;
+  /// Algorithm 1 from each refined hypothesis (the paper's mode: from the guess), the
+  /// sweeps about a flat axis and the polish.
+  double algorithm1 = 0.0;
+  double icp = 0.0;  ///< The ICP refinement of the refined hypotheses.
+  /// The check of the pose, the alternatives, the reselection and the resting poses.
+  double alternatives = 0.0;
+  double verdict = 0.0;  ///< The verdict: the covariance, the symmetries, the calibration.
+  double total = 0.0;    ///< The whole call.
+};
+
 /// Outcome of `align`.
 struct AlignResult {
   Transform T_scene_model = Transform::Identity();  ///< Maps model coordinates into the scene.
@@ -342,6 +365,7 @@ struct AlignResult {
   double voxel_size = 0.0;   ///< The voxel the alignment worked at, metres (derived for 0).
   bool single_view = false;  ///< The scene was checked as a single view from sensor_origin
                              ///< (declared, or detected: `detect_single_view`).
+  AlignTimings timings;      ///< Where the time went.
 };
 
 /// A confidence above this separates right from wrong poses: the balanced threshold

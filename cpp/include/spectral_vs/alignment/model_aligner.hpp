@@ -12,15 +12,15 @@ namespace spectral_vs {
 /// Where the time of the last `ModelAligner::align` went, seconds (wall clock).
 struct ModelAlignerTimings {
   double scene_coefficients = 0.0;  ///< The scene's EGI coefficients and the correlation's set-up.
-  double scene_map = 0.0;           ///< The extent of the scene's map for the fitness (the map
-                                    ///< itself is built with the fitness, around the model).
+  double scene_map = 0.0;           ///< The verification's set-up: the extent of its voxel
+                                    ///< screen (built with the fitness, around the model).
   double translation_grid = 0.0;    ///< The translation grid: its spec, FFT plans when its size
                                     ///< changed, the scene's voxels and spectrum.
   double rotation = 0.0;            ///< Evaluations of the EGI correlation and the rotation steps.
   double translation = 0.0;         ///< The model's voxels and the phase correlation.
   double records = 0.0;             ///< J_t and J_r of the iteration records.
-  double fitness = 0.0;             ///< Fitness (the scene's map around the model at its pose)
-                                    ///< of the result, and its check (params.verification).
+  double fitness = 0.0;             ///< The verification's fitness of the result (its screen
+                                    ///< around the model) and check (params.verification).
   double total = 0.0;               ///< The whole call.
 };
 

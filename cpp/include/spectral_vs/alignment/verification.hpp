@@ -26,7 +26,7 @@ struct VerifyParams {
 /// Inlier distance, in voxels: a model point within this of its nearest scene point.
 inline constexpr double kInlierVoxels = 1.0;
 /// Tight distance, in voxels: what a right pose reaches, refined, on a real scan's noise
-/// (a quarter voxel left right poses of the real bunny scan at 0.6).
+/// (at a quarter voxel, right poses of the real bunny scan kept a confidence of 0.6).
 inline constexpr double kTightVoxels = 0.5;
 /// Visibility margin, in voxels: a model point more than this behind the scanned
 /// surface is hidden, more than this in front of it seen through; and the radius in
