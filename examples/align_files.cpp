@@ -10,6 +10,7 @@
 #include <spectral_vs/alignment/aligner.hpp>
 #include <spectral_vs/representation/cloud_io.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
+#include <spectral_vs/rotation/so3.hpp>
 
 #include <chrono>
 #include <cmath>
@@ -21,13 +22,13 @@
 
 namespace {
 
-// Exit status: 0 when the alignment settled (converged, or kept a verified pose over where
-// Algorithm 1 went: stop_reason kept_start or reselected); 3 when it did not (the result is still
-// printed); 1 for an error such as an unreadable file; 2 for a bad command line.
-constexpr int kConverged = 0;
+// Exit status: 0 when the answer is reliable (its verdict: docs/trust.md); 3 when it is not
+// (the result is still printed, with the verdict that says why); 1 for an error such as an
+// unreadable file; 2 for a bad command line.
+constexpr int kReliable = 0;
 constexpr int kError = 1;
 constexpr int kUsage = 2;
-constexpr int kNotConverged = 3;
+constexpr int kNotReliable = 3;
 
 void print_usage(std::FILE* out) {
   std::fprintf(out,
@@ -47,7 +48,8 @@ void print_usage(std::FILE* out) {
                "  --threads N         threads for the FFTs and the rotation search (default 1)\n"
                "  -h, --help          show this message\n"
                "\n"
-               "exit status: 0 converged, 3 not converged, 1 error, 2 bad arguments\n");
+               "exit status: 0 reliable, 3 not reliable (printed with its verdict), 1 error,\n"
+               "2 bad arguments\n");
 }
 
 struct Options {
@@ -181,16 +183,23 @@ int main(int argc, char** argv) {
       const auto& T = result.T_scene_model;
       std::printf("  %10.6f %10.6f %10.6f %10.6f\n", T(r, 0), T(r, 1), T(r, 2), T(r, 3));
     }
-    const bool settled = result.converged ||
-                         result.stop_reason == spectral_vs::AlignStopReason::kept_start ||
-                         result.stop_reason == spectral_vs::AlignStopReason::reselected;
-    std::printf("converged: %s\n", settled ? "yes" : "no");
-    std::printf("iterations: %d\n", result.iterations);
+    // The one field to act on: reliable (confident, and no other pose fits as well).
+    std::printf("verdict: %s, confidence %.3f%s\n", spectral_vs::verdict_name(result.status),
+                result.confidence, result.reliable ? "" : " (not reliable)");
+    for (const spectral_vs::AlignAlternative& other : result.alternatives) {
+      const double turn = spectral_vs::rotation_distance(
+          other.T_scene_model.topLeftCorner<3, 3>(), result.T_scene_model.topLeftCorner<3, 3>());
+      std::printf("  another pose fits: %.1f deg away, confidence %.3f%s\n", turn * 180.0 / M_PI,
+                  other.confidence,
+                  other.symmetric ? " (the same up to the model's symmetry)" : "");
+    }
+    std::printf("converged: %s, iterations: %d\n", result.converged ? "yes" : "no",
+                result.iterations);
     std::printf("fitness: %.3f\n", result.fitness);
     std::printf("voxel: %.1f mm, single view: %s\n", 1000.0 * result.voxel_size,
                 result.single_view ? "yes" : "no");
     std::printf("time: %.1f ms\n", elapsed.count());
-    return settled ? kConverged : kNotConverged;
+    return result.reliable ? kReliable : kNotReliable;
   } catch (const std::exception& error) {
     // The library reports bad input (a missing file, an empty cloud, a parameter out of
     // range) as std::invalid_argument with a message naming the argument.

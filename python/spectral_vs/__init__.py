@@ -12,6 +12,8 @@ conversions :func:`from_open3d` and :func:`to_open3d`. The package is typed (PEP
 from __future__ import annotations
 
 import os
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _distribution_version
 
 from spectral_vs._core import (
     RELIABLE_CONFIDENCE,
@@ -105,7 +107,12 @@ from spectral_vs.servo import (
 from spectral_vs.verification import CONFIDENCE_THRESHOLD, PoseVerification, verify_pose
 from spectral_vs.views import align_views
 
-__version__ = "0.1.0"
+#: The installed distribution's version: the CMake project's (CMakeLists.txt), the one place
+#: it is written.
+try:
+    __version__ = _distribution_version("spectral_vs")
+except PackageNotFoundError:  # imported from a source tree that pip never installed
+    __version__ = "0+unknown"
 
 
 def load_cloud(path: str | os.PathLike[str]) -> PointCloud:
