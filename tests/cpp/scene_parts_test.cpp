@@ -4,11 +4,14 @@
 // ICP, and the fitness of a pose.
 
 #include "alignment/icp_refinement.hpp"
+#include "alignment/normal_directions.hpp"
 #include "alignment/part_coverage.hpp"
+#include "alignment/point_sets.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/resting.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/scene_preparation.hpp"
+#include "alignment/support_plane.hpp"
 #include "alignment/verifier.hpp"
 #include "test_support.hpp"
 

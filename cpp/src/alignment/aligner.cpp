@@ -15,6 +15,7 @@
 #include "alignment/scale.hpp"
 #include "alignment/scene_preparation.hpp"
 #include "alignment/stages.hpp"
+#include "alignment/support_plane.hpp"
 #include "alignment/verdict_detail.hpp"
 #include "alignment/verifier.hpp"
 #include "common/checks.hpp"

@@ -4,7 +4,7 @@
 #include <spectral_vs/rotation/so3_search.hpp>
 
 #include "alignment/icp_refinement.hpp"
-#include "alignment/scene_map.hpp"
+#include "alignment/point_sets.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>

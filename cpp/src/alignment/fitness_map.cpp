@@ -1,5 +1,7 @@
 #include "alignment/fitness_map.hpp"
 
+#include "alignment/normal_directions.hpp"
+#include "alignment/point_sets.hpp"
 #include "alignment/scene_map.hpp"
 #include "common/checks.hpp"
 

@@ -4,6 +4,7 @@
 #include <spectral_vs/rotation/so3_search.hpp>
 
 #include "alignment/align_detail.hpp"
+#include "alignment/point_sets.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>

@@ -1,6 +1,6 @@
 #include "alignment/icp_refinement.hpp"
 
-#include "alignment/scene_map.hpp"
+#include "alignment/point_sets.hpp"
 
 #include <spectral_vs/rotation/so3.hpp>
 

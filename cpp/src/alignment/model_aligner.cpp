@@ -7,6 +7,7 @@
 #include "alignment/algorithm1.hpp"
 #include "alignment/align_detail.hpp"
 #include "alignment/moving_model.hpp"
+#include "alignment/point_sets.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/verdict_detail.hpp"

@@ -2,7 +2,9 @@
 
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
+#include "alignment/point_sets.hpp"
 #include "alignment/scene_preparation.hpp"
+#include "alignment/support_plane.hpp"
 
 #include <algorithm>
 

@@ -6,7 +6,7 @@
 
 #include <spectral_vs/representation/point_cloud.hpp>
 
-#include "alignment/scene_map.hpp"
+#include "alignment/support_plane.hpp"
 
 #include <vector>
 

@@ -4,6 +4,7 @@
 
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
+#include "alignment/point_sets.hpp"
 
 #include <algorithm>
 #include <array>

@@ -1,6 +1,8 @@
 #include "alignment/resting.hpp"
 
 #include "alignment/hypotheses.hpp"
+#include "alignment/point_sets.hpp"
+#include "alignment/support_plane.hpp"
 
 #include <spectral_vs/rotation/so3.hpp>
 

@@ -10,8 +10,8 @@
 #include <spectral_vs/representation/point_cloud.hpp>
 
 #include "alignment/icp_refinement.hpp"
-#include "alignment/scene_map.hpp"
 #include "alignment/stages.hpp"
+#include "alignment/support_plane.hpp"
 
 #include <Eigen/Core>
 #include <optional>

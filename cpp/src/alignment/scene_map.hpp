@@ -1,6 +1,6 @@
 #pragma once
-// Internal to the aligner: the scene as the aligner queries it, and the voxel grids in
-// which the model's translation is found.
+// Internal to the aligner: the scene as the aligner searches it, and the voxel grids in
+// which the model's translation is found (the translation sources of Algorithm 1).
 
 #include <spectral_vs/representation/point_cloud.hpp>
 #include <spectral_vs/representation/voxel_grid.hpp>
@@ -16,31 +16,9 @@
 
 namespace spectral_vs::detail {
 
-/// The rows `rows` of `matrix`, in that order.
-Points rows_of(const Points& matrix, const std::vector<Eigen::Index>& rows);
-
-/// Every stride-th point (and normal) of `cloud`, at least its first.
-PointCloud every_nth(const PointCloud& cloud, Eigen::Index stride);
-
-// The sparse model that candidate poses are screened on (a part's rotations in clutter,
-// the alternatives): every this-many-th model point, an eighth of the nearest-point
-// queries. Screening a part's rotations on every 8th point, 263 of 280 tuning clutter
-// scenes come out right, as on every 4th; on every 2nd, 261; at 0.95 and 0.86 times
-// their CPU time.
-constexpr Eigen::Index kSparseStride = 8;
-
-/// A voxel (or cell) index as one sortable key, 21 bits per axis, each index clamped to
-/// [-2^20, 2^20 - 1]: the sparse sets of voxels of the fitness and of connected_parts.
-std::uint64_t voxel_key(const Eigen::Array3i& voxel);
-
 /// ceil(length / voxel_size), the aligner's rule for the voxels of its grids.
 /// @throws std::invalid_argument (naming max_voxels) over the limit, before any overflow.
 int voxels_along(double length, double voxel_size, const GridLimits& limits);
-
-/// The nearest of the 26 directions to a voxel's neighbours (about 35-45 degrees apart)
-/// to `normal` (either of exact equals); in `cone`, if given, every direction within 50
-/// degrees of it together with the nearest.
-int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullptr);
 
 /// The grid of the verification's voxel screen (FitnessMap) over `evidence`: its box and
 /// two voxels on each side.
@@ -58,16 +36,6 @@ GridSpec scene_map_spec(const PointCloud& evidence, double voxel_size, const Gri
 GridSpec bounded_translation_spec(const Eigen::AlignedBox3d& scene_box,
                                   const Eigen::AlignedBox3d& model_box, double max_translation,
                                   double voxel_size, const GridLimits& limits);
-
-/// The rows of `scene` within max_translation of `model_box` on every axis: the only
-/// points that a shift of at most max_translation can bring the model's points onto, so
-/// the only ones a bounded phase correlation needs (the others enter its spectrum only as
-/// clutter). All of `scene` when every point is in reach, or when none is.
-Points points_in_reach(const Points& scene, const Eigen::AlignedBox3d& model_box,
-                       double max_translation);
-
-/// The box of a non-empty set of points.
-Eigen::AlignedBox3d points_box(const Points& points);
 
 /// The scene as align() searches it: the scene points near a place, for windows (the
 /// fitness of a pose is the verification's, verifier.hpp).
@@ -179,32 +147,5 @@ class SceneTranslation : public TranslationSource {
   mutable std::optional<double> target_energy_;
   std::optional<Eigen::Vector3i> max_shift_;  // voxels; none: the whole grid
 };
-
-/// The scene's points grouped into connected parts: two points within `tolerance` metres
-/// are in one part (single linkage, on a hash grid of `tolerance` cells). Parts in
-/// decreasing size, each as rows of `points` in increasing order; deterministic.
-std::vector<std::vector<Eigen::Index>> connected_parts(const Points& points, double tolerance);
-
-/// The plane that `support_plane` finds and `without_support_plane` removes: unit normal,
-/// the mean of its points' normals (which face the sensor, on the side of the objects it
-/// carries), and offset, n . x = offset on the plane, metres: the median over the points
-/// of the plane's 1.5-voxel band.
-struct SupportPlane {
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
-  double offset = 0.0;
-};
-
-/// The scene's support plane: the largest plane of points with one normal direction, if
-/// it is wider than `min_extent` metres and holds more than a fifth of the points (a table
-/// under the objects); none otherwise. Found by `spectral_vs::dominant_plane` (voting,
-/// deterministic: the most common normal direction, then the most common offset along
-/// it, in bins of `voxel_size`).
-std::optional<SupportPlane> support_plane(const PointCloud& scene, double voxel_size,
-                                          double min_extent);
-
-/// The scene without the points of `plane`: those within `band` metres of it whose
-/// normals are within 20 degrees of its normal.
-PointCloud without_support_plane(const PointCloud& scene, const SupportPlane& plane,
-                                 double voxel_size, double band);
 
 }  // namespace spectral_vs::detail

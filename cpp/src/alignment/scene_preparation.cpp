@@ -1,6 +1,8 @@
 #include "alignment/scene_preparation.hpp"
 
 #include "alignment/align_detail.hpp"
+#include "alignment/point_sets.hpp"
+#include "alignment/support_plane.hpp"
 #include "common/checks.hpp"
 
 #include <Eigen/Eigenvalues>

@@ -1,12 +1,12 @@
 #pragma once
 // Internal to align(), its first stage: what of the scene is searched. The support
-// plane under the objects is taken out (scene_map.hpp), the rest cut into connected
+// plane under the objects is taken out (support_plane.hpp), the rest cut into connected
 // parts that could be the object, and a scene seen from one sensor is found out.
 
 #include <spectral_vs/alignment/aligner.hpp>
 
-#include "alignment/scene_map.hpp"
 #include "alignment/stages.hpp"
+#include "alignment/support_plane.hpp"
 
 #include <optional>
 #include <vector>

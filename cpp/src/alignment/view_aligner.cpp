@@ -13,6 +13,8 @@
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
+#include "alignment/normal_directions.hpp"
+#include "alignment/point_sets.hpp"
 #include "alignment/range_image.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
