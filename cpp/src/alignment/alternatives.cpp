@@ -4,6 +4,7 @@
 #include <spectral_vs/rotation/so3_search.hpp>
 
 #include "alignment/icp_refinement.hpp"
+#include "alignment/normal_directions.hpp"
 #include "alignment/point_sets.hpp"
 
 #include <Eigen/Dense>
@@ -64,7 +65,7 @@ Transform refine_translation(const PointCloud& model, const IcpScene& scene, Tra
           T.topLeftCorner<3, 3>() * model.points().row(i).transpose() + T.topRightCorner<3, 1>();
       const Eigen::Vector3d n = T.topLeftCorner<3, 3>() * model.normals().row(i).transpose();
       if (viewpoint && n.dot(*viewpoint - p) <= 0.0) continue;
-      const Eigen::Index j = scene.nearest(p, n, max_distance, 0.7071);
+      const Eigen::Index j = scene.nearest(p, n, max_distance, kAgreeingCosine);
       if (j < 0) continue;
       const Eigen::Vector3d q = scene.cloud().points().row(j).transpose();
       const Eigen::Vector3d m = scene.cloud().normals().row(j).transpose();

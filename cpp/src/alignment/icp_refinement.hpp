@@ -4,6 +4,8 @@
 
 #include <spectral_vs/representation/point_cloud.hpp>
 
+#include "alignment/normal_directions.hpp"
+
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <optional>
@@ -13,12 +15,11 @@ namespace spectral_vs::detail {
 
 /// Settings of `refine_point_to_plane`.
 struct IcpSettings {
-  double max_distance = 0.008;     ///< Pairs farther apart than this are not matched, metres.
-  double min_cosine = 0.7071;      ///< Pairs whose normals are farther apart than 45 degrees
-                                   ///< are not matched (the other side of a thin part, the table).
-  int max_iterations = 30;         ///< Gauss-Newton steps at most.
-  Eigen::Index max_points = 1500;  ///< About this many model points take part (a hashed
-                                   ///< selection of one in rows / max_points), or all.
+  double max_distance = 0.008;          ///< Pairs farther apart than this are not matched, metres.
+  double min_cosine = kAgreeingCosine;  ///< Pairs whose normals disagree are not matched.
+  int max_iterations = 30;              ///< Gauss-Newton steps at most.
+  Eigen::Index max_points = 1500;       ///< About this many model points take part (a hashed
+                                        ///< selection of one in rows / max_points), or all.
   std::optional<Eigen::Vector3d> viewpoint;  ///< Only the model points facing it take part.
 };
 

@@ -12,4 +12,10 @@ namespace spectral_vs::detail {
 /// degrees of it together with the nearest.
 int normal_direction(const Eigen::Vector3d& normal, std::uint32_t* cone = nullptr);
 
+/// Two normals agree when they are within 45 degrees: what every pairing of a model point
+/// with a scene point asks (the verification's pixels and points, the ICP, the covariance,
+/// the alternatives' translation fit). A surface turned another way (the other side of a
+/// thin part, a flip onto a parallel face, the table under an object) is no support.
+inline constexpr double kAgreeingCosine = 0.7071;
+
 }  // namespace spectral_vs::detail

@@ -1,5 +1,6 @@
 #include "alignment/range_image.hpp"
 
+#include "alignment/normal_directions.hpp"
 #include "common/checks.hpp"
 
 #include <algorithm>
@@ -135,7 +136,7 @@ ViewCheck RangeImage::check(const Points& points, const Points& normals, double 
   std::sort(model_.begin(), model_.end(), [](const Pixel& a, const Pixel& b) {
     return a.v != b.v ? a.v < b.v : a.u != b.u ? a.u < b.u : a.depth < b.depth;
   });
-  const float turned = float(std::cos(45.0 * M_PI / 180.0));
+  const float turned = float(kAgreeingCosine);
   ViewCheck result;
   for (std::size_t i = 0; i < model_.size(); ++i) {
     const std::size_t k = index(model_[i].u, model_[i].v);

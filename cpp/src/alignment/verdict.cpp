@@ -33,6 +33,7 @@ struct Knot {
 // The calibration maps, fitted on the calibration set by benchmarks/verdict_benchmark.py
 // (isotonic regression of right against score, reduced to knots): see docs/trust.md.
 #include "alignment/calibration_maps.inc"
+#include "alignment/normal_directions.hpp"
 
 double interpolate(const Knot* first, const Knot* last, double score) {
   if (score <= first->score) return first->probability;
@@ -43,9 +44,6 @@ double interpolate(const Knot* first, const Knot* last, double score) {
   const double share = (score - lower.score) / (upper->score - lower.score);
   return lower.probability + share * (upper->probability - lower.probability);
 }
-
-// Pairs of the covariance agree in normal within 45 degrees, as the verification's.
-constexpr double kPairCosine = 0.7071;
 
 }  // namespace
 
@@ -156,7 +154,7 @@ PointToPlaneFit point_to_plane_fit(const PointCloud& model, const IcpScene& scen
   for (Eigen::Index i = 0; i < model.points().rows(); ++i) {
     const Eigen::Vector3d p = R * model.points().row(i).transpose() + t;
     const Eigen::Vector3d n = R * model.normals().row(i).transpose();
-    const Eigen::Index j = scene.nearest(p, n, max_distance, kPairCosine);
+    const Eigen::Index j = scene.nearest(p, n, max_distance, kAgreeingCosine);
     if (j < 0) continue;
     const Eigen::Vector3d normal = scene_normals.row(j).transpose();
     const double residual = normal.dot(p - scene_points.row(j).transpose());

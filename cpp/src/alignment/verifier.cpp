@@ -1,4 +1,5 @@
 #include "alignment/verifier.hpp"
+#include "alignment/normal_directions.hpp"
 
 #include "common/checks.hpp"
 
@@ -8,10 +9,6 @@
 namespace spectral_vs::detail {
 
 namespace {
-
-// Pairs for `tight` agree in normal within 45 degrees: a surface turned another way (the
-// other side of a thin part, a flip onto a parallel face) is no support.
-constexpr double kTightCosine = 0.7071;
 
 Eigen::AlignedBox3d grown_box(const PointCloud& scene, double margin) {
   Eigen::AlignedBox3d box = bounding_box(scene);
@@ -117,7 +114,7 @@ PoseVerification Verifier::verify(const PointCloud& model, const Transform& T) c
     if (gap > margin && distance > v.inlier_distance) ++v.seen_through;
     // Point to plane: two samplings of one surface are half a sample spacing apart along
     // it, not across it.
-    const Eigen::Index agreeing = grid.nearest(p, normal, margin, kTightCosine);
+    const Eigen::Index agreeing = grid.nearest(p, normal, margin, kAgreeingCosine);
     if (agreeing >= 0 && std::abs(scene_normals.row(agreeing).dot(
                              p - scene_points.row(agreeing).transpose())) <= tight)
       ++v.tight;
