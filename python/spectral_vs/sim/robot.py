@@ -23,7 +23,7 @@ import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
 from spectral_vs._core import Kinematics, PointCloud
-from spectral_vs.experiment import ViewCheck
+from spectral_vs.field_of_view import ViewCheck
 from spectral_vs.sim.camera import CameraParams, back_project, depth_to_cloud, render_depth
 from spectral_vs.sim.robots import (
     BASE_LINK,
@@ -309,7 +309,7 @@ class PyBulletRobot:
 
         Returns
         -------
-        spectral_vs.experiment.ViewCheck
+        spectral_vs.field_of_view.ViewCheck
             ``check(q) -> bool``.
         """
         q_reference = np.asarray(
