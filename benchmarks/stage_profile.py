@@ -24,17 +24,6 @@ from report import BENCHMARKS_DOC, RESULTS, commit, machine, replace_block
 import spectral_vs as svs
 
 ANGLES = (30.0, 90.0, 150.0)
-#: The C++ stages of AlignTimings, in the order align() runs them.
-STAGES = (
-    "preparation",
-    "rotation_search",
-    "placement",
-    "algorithm1",
-    "icp",
-    "alternatives",
-    "verdict",
-)
-COLUMNS = ("python", *STAGES)
 
 
 def profile(case: case_lib.Case) -> dict:
@@ -46,9 +35,9 @@ def profile(case: case_lib.Case) -> dict:
     start = time.process_time()
     result = svs.align(model, scene, threads=1, **sensor)
     cpu = time.process_time() - start
-    timings = result.timings.as_dict()
-    row = {stage: timings[stage] for stage in STAGES}
-    row["python"] = max(0.0, cpu - timings["total"])
+    # The C++ stages of AlignTimings, in the order align() runs them.
+    stages = result.timings.as_dict()
+    row = {"python": max(0.0, cpu - stages.pop("total"))} | stages
     row["cpu"] = cpu
     row["reliable"] = bool(result.reliable)
     return row
@@ -65,18 +54,20 @@ def run(families: tuple[str, ...], cases_per_cell: int) -> dict[str, list[dict]]
 
 
 def table(rows: dict[str, list[dict]]) -> str:
+    first = next(iter(rows.values()))[0]
+    columns = [name for name in first if name not in ("cpu", "reliable", "case")]
     head = (
         "| family | cases | CPU per call, median (ms) | "
-        + " | ".join(COLUMNS)
+        + " | ".join(columns)
         + " |\n|---|---|---|"
-        + "---|" * len(COLUMNS)
+        + "---|" * len(columns)
     )
     lines = [head]
     for family, family_rows in rows.items():
         cpu = np.array([r["cpu"] for r in family_rows])
-        means = {c: float(np.mean([r[c] for r in family_rows])) for c in COLUMNS}
+        means = {c: float(np.mean([r[c] for r in family_rows])) for c in columns}
         total = sum(means.values())
-        cells = [f"{1000 * means[c]:.1f} ({100 * means[c] / total:.0f}%)" for c in COLUMNS]
+        cells = [f"{1000 * means[c]:.1f} ({100 * means[c] / total:.0f}%)" for c in columns]
         label = f"{family} ({case_lib.CONDITIONS[family]})"
         lines.append(
             f"| {label} | {len(family_rows)} | {1000 * float(np.median(cpu)):.1f} | "

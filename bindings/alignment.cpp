@@ -6,6 +6,7 @@
 
 #include <pybind11/stl.h>
 
+#include <limits>
 #include <sstream>
 
 namespace spectral_vs::python {
@@ -416,6 +417,25 @@ confidence : float
       },
       py::arg("model"), py::arg("scene"), py::arg("T_scene_model"), py::arg("voxel_size"),
       py::arg("viewpoint"), "verify_pose on clouds with normals; see spectral_vs.verify_pose.");
+
+  m.def(
+      "field_share",
+      [](const py::handle& reference_points, const py::handle& T, const py::handle& current_points,
+         double max_depth) {
+        const Points reference = to_points(reference_points, "reference_points");
+        const Transform T_current_reference = to_transform(T, "T_current_reference");
+        const Points current = to_points(current_points, "current_points");
+        return field_share(reference, T_current_reference, current, max_depth);
+      },
+      py::arg("reference_points"), py::arg("T_current_reference"), py::arg("current_points"),
+      py::arg("max_depth") = std::numeric_limits<double>::infinity(), R"doc(
+The share of ``reference_points`` that ``T_current_reference`` puts inside the current
+view's field: in front of the camera (z over 1 mm), no deeper than ``max_depth`` (m) and
+within the bounds of the current points' x/z and y/z (a pinhole camera's image as far as
+the view has returns; at most 4000 of them, evenly strided, bound it), in [0, 1]; 0 for no
+reference point or no current point in front. Occlusion is ignored. The servo divides its
+tracking fitness by it. Raises ValueError for non-finite points, a T that is not rigid or
+a max_depth that is not > 0.)doc");
 
   m.def(
       "covariance_inflation",

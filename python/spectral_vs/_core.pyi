@@ -785,6 +785,12 @@ class PoseVerification:
 CONFIDENCE_THRESHOLD: float
 RELIABLE_CONFIDENCE: float
 
+def field_share(
+    reference_points: npt.ArrayLike,
+    T_current_reference: npt.ArrayLike,
+    current_points: npt.ArrayLike,
+    max_depth: float = ...,
+) -> float: ...
 def covariance_inflation(kind: str) -> float: ...
 def pose_covariance(
     model: PointCloud, scene: PointCloud, T_scene_model: Any, voxel_size: float

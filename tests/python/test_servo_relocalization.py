@@ -216,6 +216,48 @@ def test_field_share_counts_what_lies_in_the_views_field():
     assert field_share(reference[:0], np.eye(4), current) == 0.0
 
 
+def field_share_by_definition(reference, T, current, max_depth=np.inf):
+    """field_share from its definition, one point at a time (an independent second method)."""
+    current = current[:: max(1, len(current) // 4000)]
+    bounds = [(x / z, y / z) for x, y, z in current if z > 1e-3]
+    if not bounds or len(reference) == 0:
+        return 0.0
+    u_low, v_low = np.min(bounds, axis=0)
+    u_high, v_high = np.max(bounds, axis=0)
+    inside = 0
+    for point in reference:
+        x, y, z = T[:3, :3] @ point + T[:3, 3]
+        if 1e-3 < z <= max_depth and u_low <= x / z <= u_high and v_low <= y / z <= v_high:
+            inside += 1
+    return inside / len(reference)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_field_share_matches_its_definition(seed):
+    rng = np.random.default_rng(seed)
+    current = rng.uniform([-0.6, -0.4, 0.3], [0.6, 0.4, 2.0], size=(9000, 3))
+    reference = rng.uniform([-1.0, -1.0, 0.2], [1.0, 1.0, 2.5], size=(700, 3))
+    angle = rng.uniform(-0.5, 0.5)
+    T = np.eye(4)
+    T[:3, :3] = [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
+    T[:3, 3] = rng.uniform(-0.2, 0.2, size=3)
+    expected = field_share_by_definition(reference, T, current, 1.8)
+    assert 0.05 < expected < 0.95  # a case with points on both sides of the field
+    assert field_share(reference, T, current, 1.8) == pytest.approx(expected, abs=1.0 / 700)
+
+
+def test_field_share_refuses_bad_input():
+    points = np.ones((4, 3))
+    with pytest.raises(ValueError, match="current_points"):
+        field_share(points, np.eye(4), np.full((4, 3), np.nan))
+    with pytest.raises(ValueError, match="T_current_reference"):
+        field_share(points, 2 * np.eye(4), points)
+    with pytest.raises(ValueError, match="max_depth"):
+        field_share(points, np.eye(4), points, max_depth=0.0)
+    with pytest.raises(ValueError, match="reference_points"):
+        field_share(np.ones((4, 2)), np.eye(4), points)
+
+
 def test_relocalizations_are_spaced_out(large_start):
     # No global registration is taken (relocalize_score 1; no recovery, which would move
     # the camera instead of registering: test_servo_recovery.py): every attempt is unconfirmed,

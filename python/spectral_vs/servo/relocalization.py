@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from spectral_vs._core import PointCloud
+from spectral_vs._core import PointCloud, field_share
 from spectral_vs._core import align_views as _align_views
 from spectral_vs.poses import pose_error
 from spectral_vs.servo.law import _rigid_inverse
@@ -19,10 +19,6 @@ from spectral_vs.servo.plane_turn import _turn_between, dominant_plane
 from spectral_vs.servo.records import ServoRecord, ServoStatus
 from spectral_vs.servo.state import ControllerState
 
-#: Current points that bound the view's field (a strided subsample), and the least depth
-#: of a point in front of the camera, m (field_share).
-_FIELD_POINTS = 4000
-_FIELD_NEAR = 1e-3
 #: The recovery widens its standoff up to this many times recover_standoff, and only once
 #: the camera is within one recover_standoff and this angle of its target (rad): a view
 #: far on the way there says nothing of the target's.
@@ -35,36 +31,6 @@ _SPOILING_SHARE = 0.1
 #: The confidence of an estimate is its fitness over the share of the reference in the
 #: field, but at least over this share (the extreme starts keep 30% in the field).
 _MIN_FIELD_SHARE = 0.3
-
-
-def field_share(
-    reference_points: np.ndarray,
-    T_current_reference: np.ndarray,
-    current_points: np.ndarray,
-    max_depth: float = math.inf,
-) -> float:
-    """The share of ``reference_points`` that ``T_current_reference`` puts inside the
-    current view's field: in front of the camera, nearer than ``max_depth`` and within the
-    bounds of the current points' x/z and y/z (a pinhole camera's image rectangle, as far as
-    the view has returns), in [0, 1]. Occlusion is ignored."""
-    reference = np.asarray(reference_points, dtype=float)
-    current = np.asarray(current_points, dtype=float)
-    if len(reference) == 0 or len(current) == 0:
-        return 0.0
-    current = current[:: max(1, len(current) // _FIELD_POINTS)]
-    current = current[current[:, 2] > _FIELD_NEAR]
-    if len(current) == 0:
-        return 0.0
-    u = current[:, 0] / current[:, 2]
-    v = current[:, 1] / current[:, 2]
-    T = np.asarray(T_current_reference, dtype=float)
-    moved = reference @ T[:3, :3].T + T[:3, 3]
-    z = moved[:, 2]
-    front = (z > _FIELD_NEAR) & (z <= max_depth)
-    z = np.where(front, z, 1.0)
-    mu, mv = moved[:, 0] / z, moved[:, 1] / z
-    inside = front & (mu >= u.min()) & (mu <= u.max()) & (mv >= v.min()) & (mv <= v.max())
-    return float(inside.mean())
 
 
 class Relocalization(ControllerState):
