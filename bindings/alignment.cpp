@@ -466,39 +466,38 @@ the residuals' variance, an inflation calibrated on the calibration set, and a w
 that keeps unconstrained directions finite (docs/trust.md).
 )doc");
 
-  py::class_<AlignTimings>(m, "AlignTimings",
-                           "Where the time of one align() went, by stage, seconds of the wall "
-                           "clock (with threads=1, its CPU time).")
-      .def_readonly("preparation", &AlignTimings::preparation,
-                    "The scene as searched (support plane out), the EGIs and their correlation, "
-                    "the single-view detection, the model's flat axis.")
-      .def_readonly("rotation_search", &AlignTimings::rotation_search,
-                    "The SO(3) searches of the hypotheses.")
-      .def_readonly("placement", &AlignTimings::placement,
-                    "The hypotheses placed by phase correlation and ranked by the "
-                    "verification's screen.")
-      .def_readonly("algorithm1", &AlignTimings::algorithm1,
-                    "Algorithm 1 from each refined hypothesis (or the guess), the sweeps and "
-                    "the polish.")
-      .def_readonly("icp", &AlignTimings::icp, "The ICP refinement of the refined hypotheses.")
-      .def_readonly("alternatives", &AlignTimings::alternatives,
-                    "The check of the pose, the alternatives, the reselection, the resting "
-                    "poses.")
-      .def_readonly("verdict", &AlignTimings::verdict,
-                    "The verdict: covariance, symmetries, calibration.")
-      .def_readonly("total", &AlignTimings::total, "The whole call.")
+  // The stages of AlignTimings in the order align() runs them, then the total: one list
+  // for the attributes and as_dict().
+  struct TimingField {
+    const char* name;
+    double AlignTimings::*member;
+    const char* doc;
+  };
+  static const TimingField kTimingFields[] = {
+      {"preparation", &AlignTimings::preparation,
+       "The scene as searched (support plane out), the EGIs and their correlation, the "
+       "single-view detection, the model's flat axis."},
+      {"rotation_search", &AlignTimings::rotation_search, "The SO(3) searches of the hypotheses."},
+      {"placement", &AlignTimings::placement,
+       "The hypotheses placed by phase correlation and ranked by the verification's screen."},
+      {"algorithm1", &AlignTimings::algorithm1,
+       "Algorithm 1 from each refined hypothesis (or the guess), the sweeps and the polish."},
+      {"icp", &AlignTimings::icp, "The ICP refinement of the refined hypotheses."},
+      {"alternatives", &AlignTimings::alternatives,
+       "The check of the pose, the alternatives, the reselection, the resting poses."},
+      {"verdict", &AlignTimings::verdict, "The verdict: covariance, symmetries, calibration."},
+      {"total", &AlignTimings::total, "The whole call."}};
+  py::class_<AlignTimings> timings(m, "AlignTimings",
+                                   "Where the time of one align() went, by stage, seconds of the "
+                                   "wall clock (with threads=1, its CPU time).");
+  for (const TimingField& field : kTimingFields)
+    timings.def_readonly(field.name, field.member, field.doc);
+  timings
       .def(
           "as_dict",
           [](const AlignTimings& t) {
             py::dict d;
-            d["preparation"] = t.preparation;
-            d["rotation_search"] = t.rotation_search;
-            d["placement"] = t.placement;
-            d["algorithm1"] = t.algorithm1;
-            d["icp"] = t.icp;
-            d["alternatives"] = t.alternatives;
-            d["verdict"] = t.verdict;
-            d["total"] = t.total;
+            for (const TimingField& field : kTimingFields) d[field.name] = t.*field.member;
             return d;
           },
           "The stages' seconds by name, in the order they run, and the total.")

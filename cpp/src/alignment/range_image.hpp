@@ -58,7 +58,6 @@ class RangeImage {
   /// negative where the scan saw something nearer (p hidden), +inf where the scan saw
   /// nothing there, NaN outside the image or behind the viewpoint.
   double depth_gap(const Eigen::Vector3d& p) const;
-  const Eigen::Vector3d& viewpoint() const { return viewpoint_; }
 
  private:
   struct Pixel {

@@ -38,11 +38,10 @@ Verifier::Verifier(const PointCloud& scene, double voxel_size,
 
 double Verifier::fitness(const Points& points, const Points& normals, double tolerance) const {
   if (viewpoint_) return check(points, normals, tolerance).fitness();
+  if (!screen_spec_) fail("Verifier: a voxel screen needs its grid (screen)");
   if (!map_) {
     map_.emplace();
-    map_->set_scene(*scene_,
-                    screen_spec_ ? *screen_spec_ : FitnessMap::spec_of(*scene_, voxel_size_, {}),
-                    coverage_);
+    map_->set_scene(*scene_, *screen_spec_, coverage_);
   }
   return map_->fitness(points, normals);
 }
@@ -142,23 +141,24 @@ double confidence_of(const PoseVerification& v) {
   return std::clamp(double(v.tight) / visible * (1.0 - double(v.seen_through) / visible), 0.0, 1.0);
 }
 
-double field_share(const Points& model_points, const Transform& T_view_model,
-                   const Points& view_points, double max_depth) {
-  if (!model_points.allFinite()) detail::fail("reference_points must be finite");
-  if (!view_points.allFinite()) detail::fail("current_points must be finite");
-  require_rigid_transform(T_view_model, "T_current_reference");
+double field_share(const Points& reference_points, const Transform& T_current_reference,
+                   const Points& current_points, double max_depth) {
+  if (!reference_points.allFinite()) detail::fail("reference_points must be finite");
+  if (!current_points.allFinite()) detail::fail("current_points must be finite");
+  require_rigid_transform(T_current_reference, "T_current_reference");
   if (!(max_depth > 0.0)) detail::fail("max_depth must be > 0, got ", max_depth);
-  // The view's field: the bounds of its returns' x/z and y/z, from an even stride of them.
+  // The current view's field: the bounds of its returns' x/z and y/z, from an even
+  // stride of them.
   constexpr Eigen::Index kFieldPoints = 4000;
   constexpr double kNear = 1e-3;  // metres: the least depth of a point in front
-  if (model_points.rows() == 0 || view_points.rows() == 0) return 0.0;
-  const Eigen::Index stride = std::max<Eigen::Index>(1, view_points.rows() / kFieldPoints);
+  if (reference_points.rows() == 0 || current_points.rows() == 0) return 0.0;
+  const Eigen::Index stride = std::max<Eigen::Index>(1, current_points.rows() / kFieldPoints);
   double u_low = INFINITY, u_high = -INFINITY, v_low = INFINITY, v_high = -INFINITY;
   bool any = false;
-  for (Eigen::Index i = 0; i < view_points.rows(); i += stride) {
-    const double z = view_points(i, 2);
+  for (Eigen::Index i = 0; i < current_points.rows(); i += stride) {
+    const double z = current_points(i, 2);
     if (!(z > kNear)) continue;
-    const double u = view_points(i, 0) / z, v = view_points(i, 1) / z;
+    const double u = current_points(i, 0) / z, v = current_points(i, 1) / z;
     u_low = std::min(u_low, u);
     u_high = std::max(u_high, u);
     v_low = std::min(v_low, v);
@@ -166,16 +166,16 @@ double field_share(const Points& model_points, const Transform& T_view_model,
     any = true;
   }
   if (!any) return 0.0;
-  const Eigen::Matrix3d R = T_view_model.topLeftCorner<3, 3>();
-  const Eigen::Vector3d t = T_view_model.topRightCorner<3, 1>();
+  const Eigen::Matrix3d R = T_current_reference.topLeftCorner<3, 3>();
+  const Eigen::Vector3d t = T_current_reference.topRightCorner<3, 1>();
   Eigen::Index inside = 0;
-  for (Eigen::Index i = 0; i < model_points.rows(); ++i) {
-    const Eigen::Vector3d p = R * model_points.row(i).transpose() + t;
+  for (Eigen::Index i = 0; i < reference_points.rows(); ++i) {
+    const Eigen::Vector3d p = R * reference_points.row(i).transpose() + t;
     if (!(p.z() > kNear && p.z() <= max_depth)) continue;
     const double u = p.x() / p.z(), v = p.y() / p.z();
     inside += u >= u_low && u <= u_high && v >= v_low && v <= v_high;
   }
-  return double(inside) / double(model_points.rows());
+  return double(inside) / double(reference_points.rows());
 }
 
 PoseVerification verify_pose(const PointCloud& model, const PointCloud& scene,

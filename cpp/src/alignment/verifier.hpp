@@ -30,8 +30,8 @@ class Verifier {
  public:
   /// `viewpoint`: the sensor origin of a single-view scene, or none for a scene seen from
   /// all sides. `screen`: the grid of the voxel screen (FitnessMap::spec_of, checked
-  /// against the caller's limits) and where it records the scene; without it, the first
-  /// fitness() of a scene seen from all sides makes one within the default limits.
+  /// against the caller's limits) and where it records the scene; needed by fitness() of
+  /// a scene seen from all sides only (a verifier that only verifies takes none).
   /// The scene must outlive the verifier. Each part is built at its first use; a verifier
   /// is used by one thread at a time.
   Verifier(const PointCloud& scene, double voxel_size,
@@ -41,6 +41,7 @@ class Verifier {
 
   /// The screen: the fitness of model points and normals already moved into the scene,
   /// with depths within `tolerance` metres for a single view, in [0, 1].
+  /// @pre a viewpoint or a screen grid was given.
   double fitness(const Points& points, const Points& normals, double tolerance) const;
   /// The single view's pixel check behind fitness() (half-voxel pixels).
   /// @pre a viewpoint was given.
@@ -50,16 +51,14 @@ class Verifier {
   /// The check behind the verdict (PoseVerification) of the model at T_scene_model.
   PoseVerification verify(const PointCloud& model, const Transform& T_scene_model) const;
 
-  bool single_view() const { return viewpoint_.has_value(); }
-  const std::optional<Eigen::Vector3d>& viewpoint() const { return viewpoint_; }
   double voxel_size() const { return voxel_size_; }
-  /// The scene's nearest-point grid for pairs within kVisibilityVoxels voxels.
-  const IcpScene& grid() const;
-  /// The same scene in cells of kInlierVoxels voxels, for pairs within that distance (the
+  /// The scene in cells of kInlierVoxels voxels, for pairs within that distance (the
   /// inliers, the ICP's pairs): a query looks at 27 times less space than in grid().
   const IcpScene& fine_grid() const;
 
  private:
+  // The scene's nearest-point grid for pairs within kVisibilityVoxels voxels.
+  const IcpScene& grid() const;
   const RangeImage& screen_image() const;
   const RangeImage& verify_image() const;
 

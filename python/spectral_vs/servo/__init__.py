@@ -86,12 +86,12 @@ from spectral_vs.servo.stages import (
 _MOVED = {
     "START_SETS": "spectral_vs.experiment",
     "CloudRecorder": "spectral_vs.experiment",
-    "ViewCheck": "spectral_vs.experiment",
+    "ViewCheck": "spectral_vs.field_of_view",
     "random_start": "spectral_vs.experiment",
     "record_dict": "spectral_vs.experiment",
     "start_poses": "spectral_vs.experiment",
     "true_errors": "spectral_vs.experiment",
-    "view_share": "spectral_vs.experiment",
+    "view_share": "spectral_vs.field_of_view",
     "plot_servo": "spectral_vs.plotting",
 }
 

@@ -65,17 +65,17 @@ struct PoseVerification {
 /// see of the model that it saw, where the model is, turned the same way.
 double confidence_of(const PoseVerification& verification);
 
-/// The share of `model_points` that `T_view_model` puts inside the field of a single view
-/// seen from its own origin (`view_points`, the view's frame: z forward): in front of the
-/// sensor (z over 1 mm), no deeper than `max_depth`, and within the bounds of the view's
-/// returns in x/z and y/z (a pinhole camera's image as far as it has returns; at most
-/// 4000 of the view's points, evenly strided, bound it). Occlusion is ignored. In [0, 1];
-/// 0 for no model point or no view point in front. The servo divides its tracking fitness
+/// The share of `reference_points` that `T_current_reference` puts inside the field of the
+/// current view, seen from its own origin (`current_points`, its frame: z forward): in
+/// front of the sensor (z over 1 mm), no deeper than `max_depth`, and within the bounds of
+/// the current points in x/z and y/z (a pinhole camera's image as far as it has returns; at
+/// most 4000 of them, evenly strided, bound it). Occlusion is ignored. In [0, 1]; 0 for no
+/// reference point or no current point in front. The servo divides its tracking fitness
 /// by it: a fit of what little of the reference is left in view is no sign of a right pose.
 /// @throws std::invalid_argument for non-finite points, a T that is not rigid or a
 ///         max_depth that is not > 0.
-double field_share(const Points& model_points, const Transform& T_view_model,
-                   const Points& view_points, double max_depth);
+double field_share(const Points& reference_points, const Transform& T_current_reference,
+                   const Points& current_points, double max_depth);
 
 /// The scene's support of the model at T_scene_model (see PoseVerification).
 /// @throws std::invalid_argument for an empty cloud, missing normals, a voxel_size that
