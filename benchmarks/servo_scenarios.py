@@ -27,6 +27,7 @@ Each (robot, set, seed, scenario, controller) writes its own file,
     python benchmarks/servo_scenarios.py --starts 5 --seeds 201 --controllers spectral
     python benchmarks/servo_scenarios.py --robots panda --scenarios box_25cm_1s,hand_20cm
     python benchmarks/servo_scenarios.py --report-only
+    python benchmarks/servo_scenarios.py --out servo_calibration --seeds 0,1  # apart
 
 Needs pybullet, and open3d for the peers (the ``bench`` extra).
 """
@@ -52,10 +53,16 @@ from servo_peers import CpuTimed, slug
 
 from spectral_vs import experiment, sim
 from spectral_vs import servo as servo_lib
+from spectral_vs.poses import pose_error
 from spectral_vs.sim import scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
-RUNS = ROOT / "benchmarks" / "results" / "servo_scenarios"
+DEFAULT_OUT = "servo_scenarios"
+RUNS = ROOT / "benchmarks" / "results" / DEFAULT_OUT
+#: Per-step verdict records of the spectral runs (score, the estimate's true error, whether
+#: the step moved), beside each run file; too large to keep in the repository, rebuilt by
+#: the same command (benchmarks/servo_confidence.py reads them).
+STEPS = ROOT / "benchmarks" / "results" / "servo_steps" / "servo_scenarios"
 SERVOING_DOC = ROOT / "docs" / "servoing.md"
 ROBOTS = ("iiwa", "panda")
 SETS = ("moderate", "large")
@@ -83,6 +90,36 @@ def run_file(robot: str, name: str, seed: int, scenario: str, label: str) -> Pat
     return RUNS / f"{robot}_{name}_{seed}_{scenario}_{slug(label)}.json"
 
 
+def set_output(name: str) -> None:
+    """Write the run files to ``benchmarks/results/<name>`` and the per-step records to
+    ``benchmarks/results/servo_steps/<name>`` (the confidence's calibration runs are kept
+    apart from the scenarios' table this way)."""
+    global RUNS, STEPS
+    RUNS = ROOT / "benchmarks" / "results" / name
+    STEPS = ROOT / "benchmarks" / "results" / "servo_steps" / name
+
+
+def step_verdicts(log: servo_lib.ServoLog, reference: Any, T_reference: np.ndarray) -> dict:
+    """Per step of a spectral run: the uncalibrated score, the calibrated confidence, whether
+    the step moved on its estimate, and the estimate's true error (mm, degrees; the
+    translation at the reference's centroid) against the camera pose of the step's frame."""
+    centroid = np.asarray(reference.points).mean(axis=0)
+    rows: dict[str, list] = {"score": [], "confidence": [], "moved": [], "mm": [], "deg": []}
+    for record in log.records:
+        T_true = np.linalg.inv(record.T_base_camera) @ T_reference
+        error = pose_error(record.T_current_desired, T_true, center=centroid)
+        rows["score"].append(_rounded(record.score, 4))
+        rows["confidence"].append(_rounded(record.confidence, 4))
+        rows["moved"].append(bool(record.reliable and not record.hold))
+        rows["mm"].append(_rounded(error.translation_mm, 2))
+        rows["deg"].append(_rounded(error.rotation_deg, 3))
+    return rows
+
+
+def _rounded(value: float, digits: int) -> float | None:
+    return round(float(value), digits) if math.isfinite(value) else None
+
+
 def run_one(
     robot: Any, scenario: scenarios.Scenario, label: str, q: np.ndarray, refs: tuple
 ) -> dict[str, Any]:
@@ -106,6 +143,7 @@ def run_one(
     if callable(remove):
         remove()
     run = scenarios.summarize(log, T_reference, robot.camera_pose())
+    verdicts = step_verdicts(log, reference, T_reference) if label == SPECTRAL else None
     return {
         "controller": label,
         "reason": run.reason,
@@ -118,6 +156,7 @@ def run_one(
         "held_steps": run.held_steps,
         "steps": run.steps,
         "step_cpu_ms": [round(1000 * s, 3) for s in controller.seconds],
+        "verdicts": verdicts,
     }
 
 
@@ -163,6 +202,9 @@ def run_cell(robot: Any, refs: tuple, cell: tuple, starts: list) -> None:
         record = run_one(robot, scenario, label, q, refs)
         record.update(index=index, start_mm=1000 * t, start_deg=math.degrees(r))
         records.append(record)
+    verdicts = [{"index": r["index"], **r["verdicts"]} for r in records if r["verdicts"]]
+    for r in records:
+        del r["verdicts"]
     out = {
         "robot": robot_name,
         "set": name,
@@ -176,7 +218,11 @@ def run_cell(robot: Any, refs: tuple, cell: tuple, starts: list) -> None:
         "wall_s": time.time() - began,
         "records": records,
     }
-    run_file(robot_name, name, seed, scenario_name, label).write_text(report_lib.to_json(out))
+    path = run_file(robot_name, name, seed, scenario_name, label)
+    path.write_text(report_lib.to_json(out))
+    if verdicts:
+        STEPS.mkdir(parents=True, exist_ok=True)
+        (STEPS / path.name).write_text(json.dumps({**out, "records": verdicts}))
     ok = sum(r["success"] for r in records)
     wandered = sum(r["wandered"] for r in records)
     print(
@@ -300,12 +346,20 @@ def main() -> None:
     parser.add_argument("--starts", type=int, default=STARTS)
     parser.add_argument("--scenarios", default=",".join(scenarios.SCENARIOS))
     parser.add_argument("--controllers", default=",".join(CONTROLLERS))
+    parser.add_argument(
+        "--out",
+        default=DEFAULT_OUT,
+        help="folder of benchmarks/results for the run files (default %(default)s: the table)",
+    )
     parser.add_argument("--report-only", action="store_true")
     parser.add_argument("--figure", action="store_true", help=f"draw {FIGURE.name} and exit")
     args = parser.parse_args()
     if args.figure:
         plot_figure(FIGURE)
         return
+    if Path(args.out).name != args.out:
+        parser.error(f"--out must be a folder name under benchmarks/results, got {args.out}")
+    set_output(args.out)
     if not args.report_only:
         args.robots = args.robots.split(",")
         args.sets = args.sets.split(",")
@@ -322,7 +376,7 @@ def main() -> None:
         f"Command: `python benchmarks/servo_scenarios.py` (options as listed in the notes "
         f"below). Machine: {machine}. One thread each.\n\n{text}"
     )
-    if report_lib.replace_block(SERVOING_DOC, "servo-scenarios", block):
+    if args.out == DEFAULT_OUT and report_lib.replace_block(SERVOING_DOC, "servo-scenarios", block):
         print(f"table written to {SERVOING_DOC.relative_to(ROOT)}")
     else:
         print(text)

@@ -176,7 +176,7 @@ def test_only_a_confirmed_estimate_is_the_relocalizations_prior():
         tries += 1
         assert trusted or not record.relocalization_prior, record.step
         confidence = servo.params.relocalize_fitness
-        trusted = record.relocalized and record.confidence >= confidence and not record.refuted
+        trusted = record.relocalized and record.score >= confidence and not record.refuted
     assert tries >= 3
     assert log.converged, log.status
     assert final_mm < 1.0 and final_deg < 0.5

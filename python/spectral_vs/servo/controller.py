@@ -391,11 +391,12 @@ class SpectralServo(SensorFaults, Relocalization):
         if not record.carried or record.visible_fitness < p.relocalization.relocalize_fitness:
             T = self._turned(cloud, scene, T)
         # fitness / share >= fitness: the share is needed only under the threshold.
-        record.confidence = (
+        record.score = (
             record.visible_fitness
             if record.visible_fitness >= p.relocalization.relocalize_fitness
-            else self._confidence(T, record.visible_fitness, cloud)
+            else self._field_score(T, record.visible_fitness, cloud)
         )
+        record.confidence = record.score
         if record.carried:
             assert guess is not None
             T = guess
@@ -432,7 +433,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._motion = np.eye(4)
         self._outage_start = now
         self._armed = self._armed or record.visible_fitness >= self.params.watchdog.watchdog_fitness
-        self._lost = not record.confidence >= self.params.relocalization.relocalize_fitness
+        self._lost = not record.score >= self.params.relocalization.relocalize_fitness
         if record.relocalized:
             self._confirmed = not self._lost
         if not self._lost:

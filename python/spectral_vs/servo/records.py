@@ -153,10 +153,13 @@ class ServoRecord:
     relocalization_prior : bool
         The global registration kept the servo's own estimate (its prior, refined) over
         every searched pose.
+    score : float
+        The registration's score, uncalibrated, in [0, 1]: its fitness over the visible part
+        of the reference (``visible_fitness``) or, under ``ServoParams.relocalize_fitness``,
+        over the part that its estimate puts inside the current view's field (at least 30%
+        of it); NaN when no registration ran. The loss and lock-on tests read it.
     confidence : float
-        The registration's fitness over the part of the reference that its estimate puts
-        inside the current view's field, in [0, 1] (``ServoParams.relocalize_fitness``);
-        NaN when no registration ran.
+        As ``score`` (not calibrated yet); NaN when no registration ran.
     carried : bool
         The estimate is the last accepted one carried along the camera's measured motion,
         not the registration's: once a relocalization was taken, at a step whose fitness is
@@ -204,6 +207,7 @@ class ServoRecord:
     relocalization_score: float = math.nan
     relocalization_verdict: str = ""
     relocalization_prior: bool = False
+    score: float = math.nan
     confidence: float = math.nan
     carried: bool = False
     recovery: str = ""

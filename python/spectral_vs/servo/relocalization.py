@@ -28,7 +28,7 @@ _ARRIVED_ROTATION = math.radians(10.0)
 #: in front of the camera is 25-40% of them, the Panda's own fingers in an extreme start's
 #: view 2-4% (they stay, and must not stop the widening).
 _SPOILING_SHARE = 0.1
-#: The confidence of an estimate is its fitness over the share of the reference in the
+#: The score of an estimate is its fitness over the share of the reference in the
 #: field, but at least over this share (the extreme starts keep 30% in the field).
 _MIN_FIELD_SHARE = 0.3
 
@@ -65,7 +65,7 @@ class Relocalization(ControllerState):
             p.relocalization.relocalize_interval, p.relocalization.relocalize_retry * growth
         )
 
-    def _confidence(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
+    def _field_score(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
         """``fitness`` over the share of the reference that ``T`` puts inside the field of
         ``cloud`` (its points' bounds in x/z and y/z, nearer than ``max_depth``; at least
         ``_MIN_FIELD_SHARE``), in [0, 1]."""
