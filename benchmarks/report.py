@@ -85,11 +85,15 @@ def auc(scores, labels) -> float | None:
     import numpy as np
 
     scores, labels = np.asarray(scores, dtype=float), np.asarray(labels, dtype=bool)
-    pos, neg = scores[labels], scores[~labels]
-    if len(pos) == 0 or len(neg) == 0:
+    n_pos, n_neg = int(labels.sum()), int((~labels).sum())
+    if n_pos == 0 or n_neg == 0:
         return None
-    greater = (pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum()
-    return float(greater / (len(pos) * len(neg)))
+    # Ranks from 1, ties given their mean rank: the positives' rank sum counts every
+    # (positive, negative) pair the positive wins, ties half (O(n log n), for 10^5 steps).
+    values, inverse, counts = np.unique(scores, return_inverse=True, return_counts=True)
+    mean_rank = np.cumsum(counts) - (counts - 1) / 2.0
+    wins = mean_rank[inverse][labels].sum() - n_pos * (n_pos + 1) / 2.0
+    return float(wins / (n_pos * n_neg))
 
 
 def pct(x: float | None) -> str:

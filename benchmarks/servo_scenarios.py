@@ -101,16 +101,22 @@ def set_output(name: str) -> None:
 
 def step_verdicts(log: servo_lib.ServoLog, reference: Any, T_reference: np.ndarray) -> dict:
     """Per step of a spectral run: the uncalibrated score, the calibrated confidence, whether
-    the step moved on its estimate, and the estimate's true error (mm, degrees; the
-    translation at the reference's centroid) against the camera pose of the step's frame."""
+    the step moved on its estimate, whether the estimate was carried along the odometry
+    (not the registration's), the estimated distance to the goal (mm), and the estimate's
+    true error (mm, degrees; the translation at the reference's centroid) against the
+    camera pose of the step's frame."""
     centroid = np.asarray(reference.points).mean(axis=0)
-    rows: dict[str, list] = {"score": [], "confidence": [], "moved": [], "mm": [], "deg": []}
+    rows: dict[str, list] = {
+        k: [] for k in ("score", "confidence", "moved", "carried", "goal_mm", "mm", "deg")
+    }
     for record in log.records:
         T_true = np.linalg.inv(record.T_base_camera) @ T_reference
         error = pose_error(record.T_current_desired, T_true, center=centroid)
         rows["score"].append(_rounded(record.score, 4))
         rows["confidence"].append(_rounded(record.confidence, 4))
         rows["moved"].append(bool(record.reliable and not record.hold))
+        rows["carried"].append(bool(record.carried))
+        rows["goal_mm"].append(_rounded(1000.0 * record.translation_error, 1))
         rows["mm"].append(_rounded(error.translation_mm, 2))
         rows["deg"].append(_rounded(error.rotation_deg, 3))
     return rows

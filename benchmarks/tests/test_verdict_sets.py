@@ -306,6 +306,17 @@ def test_auc_and_calibration_error_on_known_values():
     assert bench.expected_calibration_error(conf, right) == pytest.approx(0.5 * 0.45 + 0.5 * 0.15)
 
 
+def test_auc_counts_every_pair_ties_half_as_brute_force_does():
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        scores = rng.integers(0, 6, size=150).astype(float)  # many ties
+        labels = rng.random(150) < 0.3
+        pos, neg = scores[labels], scores[~labels]
+        pairs = [(p > n) + 0.5 * (p == n) for p in pos for n in neg]
+        assert bench.auc(scores, labels) == pytest.approx(np.mean(pairs), abs=1e-12)
+    assert bench.auc(np.array([0.2, 0.3]), np.array([True, True])) is None
+
+
 def test_the_emulated_verdict_reads_the_fitted_calibration_and_the_gates():
     calibration = {"align": {"knots": [[0.0, 0.0], [0.5, 0.2], [1.0, 0.9]], "threshold": 0.7}}
     base = {"kind": "align", "score": 0.9, "ambiguous": False, "status": None}
