@@ -90,7 +90,7 @@ def auc(scores, labels) -> float | None:
         return None
     # Ranks from 1, ties given their mean rank: the positives' rank sum counts every
     # (positive, negative) pair the positive wins, ties half (O(n log n), for 10^5 steps).
-    values, inverse, counts = np.unique(scores, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(scores, return_inverse=True, return_counts=True)
     mean_rank = np.cumsum(counts) - (counts - 1) / 2.0
     wins = mean_rank[inverse][labels].sum() - n_pos * (n_pos + 1) / 2.0
     return float(wins / (n_pos * n_neg))

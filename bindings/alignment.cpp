@@ -23,6 +23,16 @@ constexpr Choices<AlignStopReason, 5> kStopReasons{
      {"kept_start", AlignStopReason::kept_start},
      {"reselected", AlignStopReason::reselected}}};
 
+constexpr Choices<RegistrationKind, 4> kRegistrationKinds{
+    {{"align", RegistrationKind::model_to_scene},
+     {"views", RegistrationKind::view_to_view},
+     {"servo", RegistrationKind::servo_step},
+     {"servo_carried", RegistrationKind::servo_carried}}};
+
+RegistrationKind registration_kind(const std::string& kind) {
+  return parse_choice(kind, kRegistrationKinds, "kind");
+}
+
 constexpr Choices<SceneView, 3> kSceneViews{{{"auto", SceneView::automatic},
                                              {"single_view", SceneView::single_view},
                                              {"all_sides", SceneView::all_sides}}};
@@ -438,11 +448,30 @@ tracking fitness by it. Raises ValueError for non-finite points, a T that is not
 a max_depth that is not > 0.)doc");
 
   m.def(
+      "calibrated_confidence",
+      [](double score, const std::string& kind) {
+        return calibrated_confidence(score, registration_kind(kind));
+      },
+      py::arg("score"), py::arg("kind"), R"doc(
+The probability that an answer of uncalibrated ``score`` (in [0, 1]; clamped, NaN gives 0)
+is right, by the calibration map of ``kind``: 'align' (AlignResult.score), 'views'
+(ViewAlignResult.score), 'servo' (ServoRecord.score of a step whose estimate is the
+registration's) or 'servo_carried' (of a step whose estimate was carried along the
+odometry). The maps are the isotonic regressions fitted on the calibration sets
+(docs/trust.md). Raises ValueError for another kind.)doc");
+
+  m.def(
       "covariance_inflation",
       [](const std::string& kind) {
-        if (kind == "align") return covariance_inflation(RegistrationKind::model_to_scene);
-        if (kind == "views") return covariance_inflation(RegistrationKind::view_to_view);
-        throw std::invalid_argument("kind must be 'align' or 'views', got '" + kind + "'");
+        const RegistrationKind chosen = registration_kind(kind);
+        if (chosen != RegistrationKind::model_to_scene &&
+            chosen != RegistrationKind::view_to_view) {
+          throw std::invalid_argument(
+              "kind must be 'align' or 'views' (the servo's steps have "
+              "no covariance), got '" +
+              kind + "'");
+        }
+        return covariance_inflation(chosen);
       },
       py::arg("kind"),
       "The inflation k of the covariance of align() ('align') or align_views() ('views'), "

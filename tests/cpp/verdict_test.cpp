@@ -20,7 +20,8 @@ using test::box_and_sphere;
 
 TEST(CalibratedConfidence, IsMonotoneWithinZeroAndOne) {
   for (const RegistrationKind kind :
-       {RegistrationKind::model_to_scene, RegistrationKind::view_to_view}) {
+       {RegistrationKind::model_to_scene, RegistrationKind::view_to_view,
+        RegistrationKind::servo_step, RegistrationKind::servo_carried}) {
     double previous = calibrated_confidence(0.0, kind);
     EXPECT_GE(previous, 0.0);
     for (int i = 1; i <= 1000; ++i) {

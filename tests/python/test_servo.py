@@ -394,6 +394,16 @@ def test_loop_converges_and_stops_the_robot(scene, desired):
     errors = log.array("translation_error")
     assert errors[-1] < 0.001 < errors[0]
     assert np.all(np.linalg.norm(log.array("twist")[:, :3], axis=1) <= 0.1 + 1e-12)
+    # Every registered step reports its score and, through the servo's map, its
+    # calibrated confidence; the estimates of this clean run are right (under 10 mm).
+    scores, confidences = log.array("score"), log.array("confidence")
+    registered = np.isfinite(scores)
+    assert registered.sum() >= len(log.records) - 2
+    kinds = ["servo_carried" if r.carried else "servo" for r in log.records]
+    expected = [svs.calibrated_confidence(float(s), k) for s, k in zip(scores, kinds, strict=True)]
+    expected = np.array(expected)[registered]
+    assert confidences[registered] == pytest.approx(expected, abs=1e-12)
+    assert np.median(confidences[registered]) >= svs.RELIABLE_CONFIDENCE
 
 
 def test_empty_cloud_from_the_start_never_moves_and_stops_after_max_outage(scene, desired):

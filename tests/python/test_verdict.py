@@ -159,3 +159,21 @@ def test_the_covariance_bounds_the_errors_of_a_fixed_seeded_set():
             values.append(float(error @ np.linalg.solve(result.covariance, error)))
     assert len(values) >= 15
     assert 3.0 <= np.mean(values) <= 12.0, values
+
+
+def test_the_calibration_maps_are_monotone_probabilities_per_kind():
+    """calibrated_confidence reads one map per kind: non-decreasing in the score, in
+    [0, 1], a NaN score no evidence; an unknown kind named in the error."""
+    scores = np.linspace(0.0, 1.0, 201)
+    for kind in ("align", "views", "servo", "servo_carried"):
+        p = np.array([svs.calibrated_confidence(float(s), kind) for s in scores])
+        assert np.all(np.diff(p) >= -1e-12), kind
+        assert p.min() >= 0.0 and p.max() <= 1.0
+        assert p[-1] > 0.9, kind  # a perfect fit is a good answer, whatever the map
+        assert svs.calibrated_confidence(float("nan"), kind) == 0.0
+    for kind in ("align", "views"):  # no fit at all is a bad one
+        assert svs.calibrated_confidence(0.0, kind) < 0.1
+    with pytest.raises(ValueError, match="kind must be 'align', 'views', 'servo' or"):
+        svs.calibrated_confidence(0.5, "icp")
+    with pytest.raises(ValueError, match="no covariance"):
+        svs.covariance_inflation("servo")

@@ -50,14 +50,35 @@ double interpolate(const Knot* first, const Knot* last, double score) {
 double calibrated_confidence(double score, RegistrationKind kind) {
   if (!std::isfinite(score)) return 0.0;
   const double clamped = std::clamp(score, 0.0, 1.0);
-  const double p = kind == RegistrationKind::model_to_scene
-                       ? interpolate(std::begin(kObjectMap), std::end(kObjectMap), clamped)
-                       : interpolate(std::begin(kViewMap), std::end(kViewMap), clamped);
+  double p = 0.0;
+  switch (kind) {
+    case RegistrationKind::model_to_scene:
+      p = interpolate(std::begin(kObjectMap), std::end(kObjectMap), clamped);
+      break;
+    case RegistrationKind::view_to_view:
+      p = interpolate(std::begin(kViewMap), std::end(kViewMap), clamped);
+      break;
+    case RegistrationKind::servo_step:
+      p = interpolate(std::begin(kServoMap), std::end(kServoMap), clamped);
+      break;
+    case RegistrationKind::servo_carried:
+      p = interpolate(std::begin(kServoCarriedMap), std::end(kServoCarriedMap), clamped);
+      break;
+  }
   return std::clamp(p, 0.0, 1.0);
 }
 
 double covariance_inflation(RegistrationKind kind) {
-  return kind == RegistrationKind::model_to_scene ? kObjectInflation : kViewInflation;
+  switch (kind) {
+    case RegistrationKind::model_to_scene:
+      return kObjectInflation;
+    case RegistrationKind::view_to_view:
+      return kViewInflation;
+    case RegistrationKind::servo_step:
+    case RegistrationKind::servo_carried:
+      break;
+  }
+  detail::fail("covariance_inflation: the servo's steps have no covariance");
 }
 
 bool voxel_in_range(double voxel_size, double extent) {

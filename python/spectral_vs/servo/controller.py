@@ -15,6 +15,7 @@ from spectral_vs._core import (
     ModelAligner,
     PointCloud,
     ViewAlignParams,
+    calibrated_confidence,
 )
 from spectral_vs.poses import pose_error
 from spectral_vs.registration import CloudLike, as_cloud
@@ -396,7 +397,11 @@ class SpectralServo(SensorFaults, Relocalization):
             if record.visible_fitness >= p.relocalization.relocalize_fitness
             else self._field_score(T, record.visible_fitness, cloud)
         )
-        record.confidence = record.score
+        # The confidence is of the estimate the step keeps: a carried one did not take the
+        # registration, and is calibrated apart.
+        record.confidence = calibrated_confidence(
+            record.score, "servo_carried" if record.carried else "servo"
+        )
         if record.carried:
             assert guess is not None
             T = guess

@@ -159,7 +159,12 @@ class ServoRecord:
         over the part that its estimate puts inside the current view's field (at least 30%
         of it); NaN when no registration ran. The loss and lock-on tests read it.
     confidence : float
-        As ``score`` (not calibrated yet); NaN when no registration ran.
+        The probability that the step's estimate ``T_current_desired`` is right (within 5
+        degrees and 10 mm, at the reference's centroid), in [0, 1]: ``score`` through the
+        servo's calibration map, one for a registered estimate and one for a ``carried``
+        one (``spectral_vs.calibrated_confidence(score, "servo" or "servo_carried")``,
+        docs/trust.md, "The servo's confidence"); NaN when no registration ran. A report:
+        the servo's rule of motion is ``reliable``.
     carried : bool
         The estimate is the last accepted one carried along the camera's measured motion,
         not the registration's: once a relocalization was taken, at a step whose fitness is

@@ -32,6 +32,11 @@ enum class Verdict {
 enum class RegistrationKind {
   model_to_scene,  ///< align(), ModelAligner: an object model onto a scan or a scene.
   view_to_view,    ///< align_views(): two depth views of one scene.
+  servo_step,      ///< One step of the servo whose estimate is the registration's, scored
+                   ///< by its fitness (Python: ServoRecord.score). No covariance.
+  servo_carried,   ///< One step of the servo whose estimate is the last one carried along
+                   ///< the camera's measured motion (ServoRecord.carried): the score is the
+                   ///< registration's, which the estimate did not take. No covariance.
 };
 
 /// Covariance of a pose's error, 6 x 6: the rotation vector (radians) then the translation
@@ -112,7 +117,8 @@ PoseCovariance pose_covariance(const PointCloud& model, const PointCloud& scene,
 
 /// The inflation k of the covariance, per kind: with it the mean normalised estimation
 /// error squared (NEES) of the right answers of the calibration set is 6 (docs/trust.md,
-/// "Covariance"). pose_covariance uses the model-to-scene one.
+/// "Covariance"). pose_covariance uses the model-to-scene one. Throws std::invalid_argument
+/// for RegistrationKind::servo_step, which has no covariance.
 double covariance_inflation(RegistrationKind kind);
 
 }  // namespace spectral_vs
