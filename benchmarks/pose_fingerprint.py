@@ -7,7 +7,10 @@ bounded translation) on seeded cases of every family of ``benchmarks/cases.py``,
 ``align_views`` on seeded view pairs of the real scans (``spectral_vs.data.view_pairs``
 of ``../shared/data``, 320 x 240, searched and from a prior pose), and writes each
 returned pose as the hexadecimal form of its 16 doubles, with the fitness (views: the
-support's score), the verdict's score and confidence, and the status::
+support's score), the verdict's score and confidence, and the status; and, with
+``--servo-starts``, every step of short servo runs in the simulation (both arms, seed 33,
+a clean view, a box in front of the camera and stray points): the estimate, the twist,
+the score, the confidence, the hold and the status of each step::
 
     python benchmarks/pose_fingerprint.py --output before.json      # on the old code
     python benchmarks/pose_fingerprint.py --compare before.json     # on the new code
@@ -98,11 +101,52 @@ def view_poses(pairs_per_scan: int) -> dict[str, list[str]]:
     return out
 
 
+#: The servo's runs: (robot, scenario); at most SERVO_STEPS steps each.
+SERVO_RUNS = tuple(
+    (robot, scenario)
+    for robot in ("iiwa", "panda")
+    for scenario in ("clean", "box_25cm_1s", "stray_points")
+)
+SERVO_STEPS = 60
+
+
+def servo_steps(starts: int) -> dict[str, list[str]]:
+    """Every step of the servo's runs from the first ``starts`` moderate starts of seed 33:
+    the estimate, twist, score, confidence, hold and status."""
+    from spectral_vs import experiment, sim
+    from spectral_vs.sim import scenarios
+
+    out: dict[str, list[str]] = {}
+    for robot_name in ("iiwa", "panda"):
+        params = sim.SimParams(mode="kinematic", robot=sim.robot_model(robot_name))
+        with sim.PyBulletRobot(params) as robot:
+            T_reference, reference = robot.camera_pose(), robot.capture()
+            home = params.robot.home_q
+            chosen = experiment.start_poses(robot.kinematics, "moderate", starts, 33, home)
+            for scenario in (s for r, s in SERVO_RUNS if r == robot_name):
+                for index, (q, _, _) in enumerate(chosen):
+                    _, log = scenarios.run_scenario(
+                        robot, scenario, q, reference, T_reference, max_steps=SERVO_STEPS
+                    )
+                    for r in log.records:
+                        figures = [float(v).hex() for v in (r.score, r.confidence)]
+                        out[f"servo/{robot_name}-{scenario}-{index}/{r.step}"] = (
+                            fingerprint(r.T_current_desired)
+                            + fingerprint(r.twist)
+                            + figures
+                            + [r.hold, r.status.reason]
+                        )
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases-per-cell", type=int, default=2)
     parser.add_argument(
         "--view-pairs", type=int, default=2, help="view pairs per scan for align_views (0: none)"
+    )
+    parser.add_argument(
+        "--servo-starts", type=int, default=0, help="servo starts per arm and scenario (0: none)"
     )
     parser.add_argument("--output", type=Path, help="write the fingerprints here")
     parser.add_argument("--compare", type=Path, help="compare with fingerprints written before")
@@ -110,6 +154,8 @@ def main() -> int:
     current = poses(args.cases_per_cell)
     if args.view_pairs > 0:
         current |= view_poses(args.view_pairs)
+    if args.servo_starts > 0:
+        current |= servo_steps(args.servo_starts)
     if args.output:
         args.output.write_text(json.dumps(current, indent=1))
     print(f"{len(current)} poses")
