@@ -282,7 +282,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 #: Methods of SpectralServo timed in the closed loop, and their stage names.
 SERVO_STAGES = {
     "_crop": "crop (max_depth)",
-    "_stale": "stale-frame test (fingerprint)",
     "_prepare": "voxel downsampling",
     "_relocalize": "relocalization (align_views)",
     "twist": "control law",
@@ -336,6 +335,7 @@ def closed_loop(set_name: str, count: int, seed: int) -> dict[str, Any]:
             times: dict[str, float] = {}
             for method, stage in SERVO_STAGES.items():
                 _timed(servo, method, stage, times)
+            _timed(servo._stale_frames, "check", "stale-frame test (fingerprint)", times)
             _timed(servo_lib, "near_occluders", "occluder test", times)
             if getattr(servo, "_plane_turn", None) is not None:
                 _timed(servo._plane_turn, "turn", "plane turn", times)

@@ -20,6 +20,7 @@ from spectral_vs._core import (
 from spectral_vs.poses import pose_error
 from spectral_vs.registration import CloudLike, as_cloud
 from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
+from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse
 from spectral_vs.servo.plane_turn import _PlaneTurn, dominant_plane
 from spectral_vs.servo.records import (
@@ -77,6 +78,8 @@ class SpectralServo(SensorFaults, Relocalization):
         self._align_params = self.params.align_params()
         self._view_params = ViewAlignParams(**self.params.relocalization.view_overrides)
         self.reference = self._prepare(cloud, "reference")
+        self._clock = StepClock()
+        self._stale_frames = StaleFrames()
         # What the relocalization registers: the reference as captured, with its normals.
         self._reference_view = cloud if cloud.has_normals else self.reference
         # The reference's side of the registration (its EGI coefficients, centred points)
@@ -124,7 +127,6 @@ class SpectralServo(SensorFaults, Relocalization):
         self._settled = False
         self._outside = 0
         self._ever_anchored = False
-        self._last_now: float | None = None
         self._reset_faults()
 
     @property
@@ -260,7 +262,7 @@ class SpectralServo(SensorFaults, Relocalization):
         """:meth:`step_record` without its CPU time: the frame's faults, the occluders, the
         relocalization or the recovery, the registration, the watchdog, the stop rule."""
         start = time.perf_counter()
-        now = self._clock(now)
+        now = self._clock.tick(now)
         motion = self._carry(T_previous_current)
         # A sensor's invalid returns are dropped at each step, never raised on.
         raw = as_cloud(current, "current", drop_non_finite=True)
@@ -306,22 +308,6 @@ class SpectralServo(SensorFaults, Relocalization):
             self._command(T, record)
         record.seconds = time.perf_counter() - start
         return record.twist, record.status, record
-
-    def _clock(self, now: float | None) -> float:
-        """The step's time, s: ``now``, checked to be finite and not before the last step's
-        (ValueError naming ``now``), or the monotonic clock."""
-        if now is None:
-            return time.monotonic()
-        value = float(now)
-        if not math.isfinite(value):
-            raise ValueError(f"now must be a finite time in s, got {now}")
-        if self._last_now is not None and value < self._last_now:
-            raise ValueError(
-                f"now must not go backwards: got {value} s after {self._last_now} s "
-                "(the same clock at every step; reset() starts a new run)"
-            )
-        self._last_now = value
-        return value
 
     def _unreliable_message(self, record: ServoRecord) -> str:
         """Why a step without an estimate holds: the last global registration's verdict."""
@@ -436,7 +422,7 @@ class SpectralServo(SensorFaults, Relocalization):
         the outage's clock, the lock-on and whether the servo is lost."""
         self._previous = T
         self._motion = np.eye(4)
-        self._outage_start = now
+        self._clock.usable(now)
         self._armed = self._armed or record.visible_fitness >= self.params.watchdog.watchdog_fitness
         self._lost = not record.score >= self.params.relocalization.relocalize_fitness
         if record.relocalized:

@@ -11,19 +11,9 @@ import time
 import numpy as np
 
 from spectral_vs._core import PointCloud
-from spectral_vs.poses import pose_error
-from spectral_vs.sensor_faults import frame_fingerprint, near_occluders
+from spectral_vs.sensor_faults import near_occluders
 from spectral_vs.servo.records import ServoRecord, ServoStatus
 from spectral_vs.servo.state import ControllerState
-
-#: The camera counts as still (a repeated frame is then no stale frame) while it has moved
-#: less than this since the frame was first seen, m and rad.
-_STILL_TRANSLATION = 1e-6
-_STILL_ROTATION = 1e-6
-
-#: Slack of the outage's comparison with max_outage, s: a robot clock adding up periods of
-#: 0.1 s reads 0.30000000000000004 after three.
-_CLOCK_TOLERANCE = 1e-9
 
 #: Reference points kept for the occluder test (a strided subsample of the reference as
 #: captured): its bins (2.9 degrees) then hold about 10 points each at 160 x 120.
@@ -60,7 +50,7 @@ class SensorFaults(ControllerState):
         if points == 0 or points < p.faults.min_points:
             hold = "empty_cloud" if points == 0 else "too_few_points"
             return hold, f"the current cloud has {points} points (min_points {p.faults.min_points})"
-        stale = self._stale(raw, stamp)
+        stale = self._stale_frames.check(raw, stamp)
         return None if stale is None else ("stale_frame", stale)
 
     def _drop_occluders(
@@ -114,14 +104,12 @@ class SensorFaults(ControllerState):
 
     def _reset_faults(self) -> None:
         """Forget what the fault tests remember: the camera's motion since the last accepted
-        step (and since the first, the arrival check's odometry), the last frame's
-        fingerprint and stamp, and the outage's start."""
+        step (and since the first, the arrival check's odometry), the last frame and stamp,
+        and the clock's last step and usable frame."""
         self._motion = np.eye(4)  # T_accepted_current: since the last accepted step
         self._odometry = np.eye(4)  # T_first_current: since the first step
-        self._frame_key: bytes | None = None  # fingerprint of the last non-empty frame
-        self._frame_motion = np.eye(4)  # the camera's motion since that frame came first
-        self._last_stamp: float | None = None
-        self._outage_start: float | None = None  # the last accepted frame's time
+        self._stale_frames.reset()
+        self._clock.reset()
 
     def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:
         """Add the camera's motion since the previous step (identity when not given) to the
@@ -131,34 +119,8 @@ class SensorFaults(ControllerState):
             step = _motion_step(T_previous_current)
             self._motion = self._motion @ step
             self._odometry = self._odometry @ step
-            self._frame_motion = self._frame_motion @ step
+            self._stale_frames.moved(step)
         return self._motion
-
-    def _stale(self, cloud: PointCloud, stamp: float | None) -> str | None:
-        """A message when ``cloud`` is a frame already seen, else None; remembers it.
-
-        A stamp not later than the last one is stale. The same fingerprint is stale once
-        the camera has moved since the frame came first: a still camera in a still scene
-        may see the very same frame (a noise-free simulation does), and acting on it then
-        is right.
-        """
-        if stamp is not None:
-            last = self._last_stamp
-            if last is not None and not float(stamp) > last:
-                return f"capture stamp {float(stamp):.6f} s is not after the last, {last:.6f} s"
-            self._last_stamp = float(stamp)
-        key = frame_fingerprint(np.asarray(cloud.points))
-        if key != self._frame_key:
-            self._frame_key = key
-            self._frame_motion = np.eye(4)
-            return None
-        moved, turned = pose_error(self._frame_motion)
-        if moved < _STILL_TRANSLATION and turned < _STILL_ROTATION:
-            return None
-        return (
-            f"the same frame again after the camera moved {1000 * moved:.2f} mm and "
-            f"{math.degrees(turned):.3f} deg"
-        )
 
     def _hold(
         self,
@@ -170,21 +132,6 @@ class SensorFaults(ControllerState):
     ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
         """Finish ``record`` as a held step (zero twist, nothing remembered), or stop with
         ``"sensor_outage"`` when the holds have lasted longer than ``max_outage``."""
-        if self._outage_start is None:
-            self._outage_start = now  # no frame accepted yet: the outage starts here
-        outage = now - self._outage_start
-        record.hold, record.outage = hold, outage
-        record.twist = np.zeros(6)
-        limit = self.params.faults.max_outage
-        if limit == 0 or outage > limit + _CLOCK_TOLERANCE:
-            unreliable = hold == "unreliable"
-            record.status = ServoStatus(
-                "stopped",
-                "unreliable" if unreliable else "sensor_outage",
-                f"no {'reliable estimate' if unreliable else 'usable frame'} for "
-                f"{outage:.3f} s (max_outage {limit:g} s); last hold {hold}: {message}",
-            )
-        else:
-            record.status = ServoStatus("running", "", f"holding ({hold}): {message}")
+        self._clock.hold(record, hold, message, now, self.params.faults.max_outage)
         record.seconds = time.perf_counter() - start
         return record.twist, record.status, record

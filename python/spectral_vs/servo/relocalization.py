@@ -197,7 +197,7 @@ class Relocalization(ControllerState):
         ``recover_steps`` were spent; no registration runs."""
         p = self.params
         self._recovery_steps += 1
-        self._outage_start = now  # the frame was usable: no sensor outage
+        self._clock.usable(now)  # the frame was usable: no sensor outage
         if self._recovery_steps > p.recovery.recover_steps:
             record.status = ServoStatus(
                 "stopped",

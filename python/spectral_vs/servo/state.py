@@ -9,6 +9,7 @@ import numpy as np
 from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_downsample
 from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import prepare
+from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
 from spectral_vs.servo.scale import ServoScale, crop_to_depth
 from spectral_vs.servo.settings import ServoParams
@@ -30,6 +31,8 @@ class ControllerState:
     _occlusion_reference: np.ndarray  #: a strided subsample of the reference's points
     _reference_plane: tuple[np.ndarray, float] | None  #: its dominant plane (normal, distance)
     _reference_height: float | None  #: how high its scene stands above that plane, m
+    _clock: StepClock  #: the steps' times and the outage
+    _stale_frames: StaleFrames  #: the last frame, for the stale-frame test
 
     # What the controller remembers between steps (set by reset()).
     _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
@@ -38,7 +41,6 @@ class ControllerState:
     _last_turn: float  #: the plane turn of the last estimate, rad
     _anchored: bool  #: a global registration was taken: registrations warm-start
     _ever_anchored: bool  #: one was taken in this run (no recovery after it)
-    _last_now: float | None  #: the last step's time, s (now never goes backwards)
     _lost: bool  #: no trusted estimate: the next step relocalizes
     _since_relocalization: int | None  #: steps since the last attempt
     _confirmed: bool  #: the last relocalization was taken and confirmed
@@ -56,10 +58,6 @@ class ControllerState:
     _odometry: np.ndarray  #: T_first_current: the camera's motion since the first step
     _refuted: list[np.ndarray]  #: T_first_desired of the estimates the arrival check refuted
     _poor_arrivals: int  #: steps in a row at the goal under refute_fitness
-    _frame_key: bytes | None  #: fingerprint of the last non-empty frame
-    _frame_motion: np.ndarray  #: the camera's motion since that frame came first
-    _last_stamp: float | None
-    _outage_start: float | None  #: the last accepted frame's time
 
     def _crop(self, cloud: PointCloud) -> PointCloud:
         """The points within ``max_depth`` of the camera (along its optical axis)."""
