@@ -8,9 +8,10 @@ bounded translation) on seeded cases of every family of ``benchmarks/cases.py``,
 of ``../shared/data``, 320 x 240, searched and from a prior pose), and writes each
 returned pose as the hexadecimal form of its 16 doubles, with the fitness (views: the
 support's score), the verdict's score and confidence, and the status; and, with
-``--servo-starts``, every step of short servo runs in the simulation (both arms, seed 33,
-a clean view, a box in front of the camera and stray points): the estimate, the twist,
-the score, the confidence, the hold and the status of each step::
+``--servo-starts``, every step of short servo runs in the simulation (both arms, moderate
+and large starts of seed 33, a clean view, a box in front of the camera and stray points):
+the estimate, the twist, the score, the confidence, the hold, the recovery and the status
+of each step::
 
     python benchmarks/pose_fingerprint.py --output before.json      # on the old code
     python benchmarks/pose_fingerprint.py --compare before.json     # on the new code
@@ -111,8 +112,9 @@ SERVO_STEPS = 60
 
 
 def servo_steps(starts: int) -> dict[str, list[str]]:
-    """Every step of the servo's runs from the first ``starts`` moderate starts of seed 33:
-    the estimate, twist, score, confidence, hold and status."""
+    """Every step of the servo's runs from the first ``starts`` moderate and large starts of
+    seed 33 (the large ones relocalize, recover and carry): the estimate, twist, score,
+    confidence, hold, recovery and status."""
     from spectral_vs import experiment, sim
     from spectral_vs.sim import scenarios
 
@@ -122,9 +124,15 @@ def servo_steps(starts: int) -> dict[str, list[str]]:
         with sim.PyBulletRobot(params) as robot:
             T_reference, reference = robot.camera_pose(), robot.capture()
             home = params.robot.home_q
-            chosen = experiment.start_poses(robot.kinematics, "moderate", starts, 33, home)
+            chosen = [
+                (f"{name}{index}", q)
+                for name in ("moderate", "large")
+                for index, (q, _, _) in enumerate(
+                    experiment.start_poses(robot.kinematics, name, starts, 33, home)
+                )
+            ]
             for scenario in (s for r, s in SERVO_RUNS if r == robot_name):
-                for index, (q, _, _) in enumerate(chosen):
+                for index, q in chosen:
                     _, log = scenarios.run_scenario(
                         robot, scenario, q, reference, T_reference, max_steps=SERVO_STEPS
                     )
@@ -134,7 +142,7 @@ def servo_steps(starts: int) -> dict[str, list[str]]:
                             fingerprint(r.T_current_desired)
                             + fingerprint(r.twist)
                             + figures
-                            + [r.hold, r.status.reason]
+                            + [r.hold, r.recovery, r.status.reason]
                         )
     return out
 
