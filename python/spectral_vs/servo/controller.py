@@ -22,13 +22,14 @@ from spectral_vs.registration import CloudLike, as_cloud
 from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
 from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse
-from spectral_vs.servo.plane_turn import _PlaneTurn, dominant_plane
+from spectral_vs.servo.plane_turn import _PlaneTurn
 from spectral_vs.servo.records import (
     ServoRecord,
     ServoStatus,
     _converged_status,
     _empty_record,
 )
+from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.relocalization import Relocalization
 from spectral_vs.servo.scale import resolve_scale
 from spectral_vs.servo.settings import ServoParams
@@ -99,20 +100,7 @@ class SpectralServo(SensorFaults, Relocalization):
         reference_points = np.asarray(cloud.points)
         stride = max(1, math.ceil(len(reference_points) / _OCCLUSION_REFERENCE_POINTS))
         self._occlusion_reference = np.array(reference_points[::stride], dtype=float)
-        # The recovery's reference side: the plane it levels the camera onto, if any.
-        self._reference_plane = dominant_plane(
-            np.asarray(self._reference_view.points),
-            np.asarray(self._reference_view.normals),
-            self.params.plane.plane_cone,
-            self.params.plane.min_plane_share,
-            nearest=True,
-        )
-        # How high the reference's scene stands above its plane (the tallest object), m.
-        self._reference_height: float | None = None
-        if self._reference_plane is not None:
-            normal, distance = self._reference_plane
-            heights = np.asarray(self._reference_view.points) @ normal + distance
-            self._reference_height = float(np.percentile(heights, 99.9))
+        self._recovery = Recovery.of(self._reference_view, self.params, self._prepare)
         self.reset()
 
     def reset(self) -> None:
@@ -278,7 +266,7 @@ class SpectralServo(SensorFaults, Relocalization):
 
         relocalize = self.params.relocalization.relocalize
         if relocalize and not self._anchored:
-            cloud = self._drop_above_the_scene(cloud, record)
+            cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry)
         if self._since_relocalization is not None:
             self._since_relocalization += 1
         if relocalize and self._lost and self._relocalization_due():

@@ -11,6 +11,7 @@ from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import prepare
 from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
+from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.scale import ServoScale, crop_to_depth
 from spectral_vs.servo.settings import ServoParams
 
@@ -29,10 +30,9 @@ class ControllerState:
     _tracking_aligner: ModelAligner | None
     _centroid: np.ndarray
     _occlusion_reference: np.ndarray  #: a strided subsample of the reference's points
-    _reference_plane: tuple[np.ndarray, float] | None  #: its dominant plane (normal, distance)
-    _reference_height: float | None  #: how high its scene stands above that plane, m
     _clock: StepClock  #: the steps' times and the outage
     _stale_frames: StaleFrames  #: the last frame, for the stale-frame test
+    _recovery: Recovery  #: the recovery, before the run's first estimate
 
     # What the controller remembers between steps (set by reset()).
     _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
@@ -45,13 +45,6 @@ class ControllerState:
     _since_relocalization: int | None  #: steps since the last attempt
     _confirmed: bool  #: the last relocalization was taken and confirmed
     _unconfirmed: int  #: relocalizations in a row not confirmed (the backoff)
-    _failed_relocalizations: int  #: relocalizations in a row under the score (the recovery)
-    _widening_tries: int  #: of them, from the recovery's target, no occluder (its standoff)
-    _recovery_arrived: bool  #: the camera is at the recovery's target
-    #: The recovery's plane (normal, distance) in the frame first seen, and T_first_that frame.
-    _scene_plane: tuple[np.ndarray, float, np.ndarray] | None
-    _recovery_steps: int
-    _T_motion_backoff: np.ndarray | None  #: _motion at the back-off's start
     _settled: bool  #: converged and not re-engaged since (the hysteresis)
     _outside: int  #: settled steps in a row whose estimate left the re-engage bounds
     _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
