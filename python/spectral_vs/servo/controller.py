@@ -33,6 +33,7 @@ from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.relocalization import Relocalization
 from spectral_vs.servo.scale import resolve_scale
 from spectral_vs.servo.settings import ServoParams
+from spectral_vs.servo.stop import StopRule
 
 
 def _check_points(reference: PointCloud, min_points: int) -> None:
@@ -101,6 +102,7 @@ class SpectralServo(SensorFaults, Relocalization):
         stride = max(1, math.ceil(len(reference_points) / _OCCLUSION_REFERENCE_POINTS))
         self._occlusion_reference = np.array(reference_points[::stride], dtype=float)
         self._recovery = Recovery.of(self._reference_view, self.params, self._prepare)
+        self._stop_rule = StopRule(self.params)
         self.reset()
 
     def reset(self) -> None:
@@ -112,8 +114,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._last_turn = 0.0
         self._refuted = []
         self._poor_arrivals = 0
-        self._settled = False
-        self._outside = 0
+        self._stop_rule.reset()
         self._ever_anchored = False
         self._reset_faults()
 
@@ -420,11 +421,7 @@ class SpectralServo(SensorFaults, Relocalization):
 
     def _command(self, T: np.ndarray, record: ServoRecord) -> None:
         """The stop rule with its hysteresis, else the twist toward ``T``."""
-        converged = self._converged(record)
-        if converged:
-            self._outside = 0
-        self._settled = converged or (self._settled and self._held(record))
-        if self._settled:
+        if self._stop_rule.settled(record):
             record.status = _converged_status(record.translation_error, record.rotation_error)
         else:
             record.twist, record.saturation = self.twist(T)
@@ -444,34 +441,6 @@ class SpectralServo(SensorFaults, Relocalization):
         c = self._centroid
         moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
         return bool(np.abs(moved).max() <= 0.5 * self.params.registration.tracking_translation)
-
-    def _converged(self, record: ServoRecord) -> bool:
-        p = self.params
-        if not record.visible_fitness >= p.stop.min_fitness:
-            return False
-        if record.hidden_share >= p.faults.occlusion_min_share:
-            # The registration of a view with a hole is biased by the hole (3.5 mm and
-            # 1 degree with a box at 15 cm): the servo moves on it, but converges only on
-            # a clear view.
-            return False
-        if (
-            record.translation_error < p.stop.translation_tolerance
-            and record.rotation_error < p.stop.rotation_tolerance
-        ):
-            return True
-        eq17 = record.translation_step + record.rotation_gradient
-        return p.stop.step_tolerance > 0 and bool(eq17 < p.stop.step_tolerance)
-
-    def _held(self, record: ServoRecord) -> bool:
-        """Whether a converged servo stays so: its estimate has not been outside the
-        re-engage bounds for ``reengage_steps`` steps in a row."""
-        p = self.params
-        inside = (
-            record.translation_error <= p.stop.reengage_translation
-            and record.rotation_error <= p.stop.reengage_rotation
-        )
-        self._outside = 0 if inside else self._outside + 1
-        return self._outside < p.stop.reengage_steps
 
     def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
         """A message when ``T`` is implausibly far from the previous estimate carried along

@@ -45,8 +45,6 @@ class ControllerState:
     _since_relocalization: int | None  #: steps since the last attempt
     _confirmed: bool  #: the last relocalization was taken and confirmed
     _unconfirmed: int  #: relocalizations in a row not confirmed (the backoff)
-    _settled: bool  #: converged and not re-engaged since (the hysteresis)
-    _outside: int  #: settled steps in a row whose estimate left the re-engage bounds
     _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
     _odometry: np.ndarray  #: T_first_current: the camera's motion since the first step
     _refuted: list[np.ndarray]  #: T_first_desired of the estimates the arrival check refuted
