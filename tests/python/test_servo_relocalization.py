@@ -18,6 +18,7 @@ from spectral_vs.servo import (
     run_servo,
     start_poses,
 )
+from spectral_vs.servo.arrival import ArrivalCheck
 
 sim = pytest.importorskip("spectral_vs.sim")
 
@@ -157,7 +158,34 @@ def test_the_arrival_check_refutes_a_goal_that_fits_poorly():
     assert servo.previous_estimate is None and servo._lost
     far = np.eye(4)
     far[:3, 3] = (0.3, 0.0, 0.0)
-    assert servo._near_refuted(near_goal) and not servo._near_refuted(far)
+    assert servo._arrival.near_refuted(near_goal, servo._odometry)
+    assert not servo._arrival.near_refuted(far, servo._odometry)
+
+
+def test_a_refuted_goal_is_placed_by_the_odometry():
+    """The arrival check alone: a goal refuted at one camera pose is recognised from
+    another, once the estimate is carried by the camera's measured motion (T_first_current),
+    and a goal 0.3 m away is not."""
+    # Scale lengths as resolved for a scene about 1 m across (0: derived by the servo).
+    params = ServoParams(jump_limit_translation=0.05, refute_translation=0.01)
+    check = ArrivalCheck(params)
+    T_goal = np.eye(4)
+    T_goal[:3, 3] = (0.002, 0.0, 0.0)
+    record = _empty_record(0, 1000)
+    record.translation_error, record.rotation_error = 0.002, 0.0
+    record.visible_fitness = params.refute_fitness - 0.1
+    refuted = [check.refutes(T_goal, record, np.eye(4)) for _ in range(params.refute_steps)]
+    assert refuted == [False] * (params.refute_steps - 1) + [True]
+    moved = np.eye(4)  # T_first_current: the camera moved 10 cm along x and turned 30 deg
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    moved[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    moved[:3, 3] = (0.1, 0.0, 0.0)
+    same_goal = np.linalg.inv(moved) @ T_goal  # the refuted goal seen from the new pose
+    assert check.near_refuted(same_goal, moved)
+    assert not check.near_refuted(T_goal, moved)  # the old estimate, not carried: 10 cm off
+    far = same_goal.copy()
+    far[:3, 3] += (0.3, 0.0, 0.0)
+    assert not check.near_refuted(far, moved)
 
 
 def test_only_a_confirmed_estimate_is_the_relocalizations_prior():

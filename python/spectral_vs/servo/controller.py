@@ -19,6 +19,7 @@ from spectral_vs._core import (
 )
 from spectral_vs.poses import pose_error
 from spectral_vs.registration import CloudLike, as_cloud
+from spectral_vs.servo.arrival import ArrivalCheck
 from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
 from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse
@@ -103,6 +104,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._occlusion_reference = np.array(reference_points[::stride], dtype=float)
         self._recovery = Recovery.of(self._reference_view, self.params, self._prepare)
         self._stop_rule = StopRule(self.params)
+        self._arrival = ArrivalCheck(self.params)
         self.reset()
 
     def reset(self) -> None:
@@ -112,8 +114,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._forget_estimate()
         self._steps = 0
         self._last_turn = 0.0
-        self._refuted = []
-        self._poor_arrivals = 0
+        self._arrival.reset()
         self._stop_rule.reset()
         self._ever_anchored = False
         self._reset_faults()

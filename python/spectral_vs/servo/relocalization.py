@@ -12,8 +12,6 @@ import numpy as np
 
 from spectral_vs._core import PointCloud, field_share
 from spectral_vs._core import align_views as _align_views
-from spectral_vs.poses import pose_error
-from spectral_vs.servo.law import _rigid_inverse
 from spectral_vs.servo.records import ServoRecord, ServoStatus
 from spectral_vs.servo.state import ControllerState
 
@@ -89,7 +87,7 @@ class Relocalization(ControllerState):
         )
         # Only the answer the verdict vouches for: never an alternative it did not judge,
         # nor a pose the arrival check refuted.
-        if not result.reliable or score < least or self._near_refuted(T):
+        if not result.reliable or score < least or self._arrival.near_refuted(T, self._odometry):
             self._recovery.failed(self._recovering(), record)
             return
         self._recovery.reset()
@@ -100,36 +98,13 @@ class Relocalization(ControllerState):
         self._ever_anchored = True
         self._lost = False
 
-    def _near_refuted(self, T_current_desired: np.ndarray) -> bool:
-        """Whether ``T_current_desired`` puts the goal within the watchdog's jump limits of
-        a refuted estimate's (both placed by the camera's measured motion)."""
-        T_first_desired = self._odometry @ T_current_desired
-        limits = self.params.watchdog
-        for refuted in self._refuted:
-            moved, turned = pose_error(_rigid_inverse(refuted) @ T_first_desired)
-            if moved <= limits.jump_limit_translation and turned <= limits.jump_limit_rotation:
-                return True
-        return False
-
     def _check_arrival(self, T: np.ndarray, record: ServoRecord) -> None:
-        """The arrival check (``ServoParams.refute_fitness``): an estimate ``T`` near the goal
-        whose fitness stays under ``refute_fitness`` for ``refute_steps`` steps is refuted:
-        remembered, forgotten as the estimate, and the next step relocalizes."""
-        p = self.params
-        if not p.relocalization.relocalize:
+        """The arrival check (:class:`~spectral_vs.servo.arrival.ArrivalCheck`): an estimate
+        ``T`` it refutes is forgotten, and the next step relocalizes."""
+        if not self.params.relocalization.relocalize:
             return
-        at_goal = (
-            record.translation_error <= p.relocalization.refute_translation
-            and record.rotation_error <= p.relocalization.refute_rotation
-        )
-        poor = at_goal and record.visible_fitness < p.relocalization.refute_fitness
-        self._poor_arrivals = self._poor_arrivals + 1 if poor else 0
-        if self._poor_arrivals < p.relocalization.refute_steps:
-            return
-        record.refuted = True
-        self._refuted.append(self._odometry @ T)
-        self._poor_arrivals = 0
-        self._forget_estimate()
+        if self._arrival.refutes(T, record, self._odometry):
+            self._forget_estimate()
 
     def _forget_estimate(self) -> None:
         """Forget the estimate and everything learnt about it: the watchdog's lock-on, the

@@ -9,6 +9,7 @@ import numpy as np
 from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_downsample
 from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import prepare
+from spectral_vs.servo.arrival import ArrivalCheck
 from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
 from spectral_vs.servo.recovery import Recovery
@@ -33,6 +34,7 @@ class ControllerState:
     _clock: StepClock  #: the steps' times and the outage
     _stale_frames: StaleFrames  #: the last frame, for the stale-frame test
     _recovery: Recovery  #: the recovery, before the run's first estimate
+    _arrival: ArrivalCheck  #: the estimates refuted on arrival
 
     # What the controller remembers between steps (set by reset()).
     _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
@@ -47,8 +49,6 @@ class ControllerState:
     _unconfirmed: int  #: relocalizations in a row not confirmed (the backoff)
     _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
     _odometry: np.ndarray  #: T_first_current: the camera's motion since the first step
-    _refuted: list[np.ndarray]  #: T_first_desired of the estimates the arrival check refuted
-    _poor_arrivals: int  #: steps in a row at the goal under refute_fitness
 
     def _crop(self, cloud: PointCloud) -> PointCloud:
         """The points within ``max_depth`` of the camera (along its optical axis)."""
