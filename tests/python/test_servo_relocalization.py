@@ -19,6 +19,7 @@ from spectral_vs.servo import (
     start_poses,
 )
 from spectral_vs.servo.arrival import ArrivalCheck
+from spectral_vs.servo.schedule import RelocalizationSchedule
 
 sim = pytest.importorskip("spectral_vs.sim")
 
@@ -352,3 +353,29 @@ def test_the_relocalized_estimate_is_carried_until_lock_on(large_start):
     assert not log.records[-1].carried and log.records[-1].fitness >= 0.9
     assert log.converged and t_mm < 2.0 and r_deg < 0.5
     assert sum(r.relocalized for r in log.records) == 1
+
+
+def test_the_schedule_spaces_unconfirmed_relocalizations_2_4_8_10_steps():
+    """The schedule alone, at the defaults (relocalize_retry 2, relocalize_backoff 2,
+    relocalize_interval 10, recover_retry 8): from a view that stays lost the attempts come
+    2, 4, 8, 10, 10 steps apart; after a confirmed one, 10; while recovering, every
+    recover_retry steps."""
+    params = ServoParams()
+    schedule = RelocalizationSchedule(params)
+
+    def gaps(attempts: int, recovering: bool = False) -> list[int]:
+        out, since = [], 0
+        for _ in range(attempts):
+            while not schedule.due(recovering):
+                schedule.step()
+                since += 1
+            out.append(since)
+            schedule.tried()
+            since = 0
+        return out
+
+    assert gaps(6)[1:] == [2, 4, 8, 10, 10]
+    schedule.accepted(relocalized=True, trusted=True)  # the last one is confirmed
+    assert gaps(2) == [10, 2]  # then lost again: retried after 2 (no backoff yet)
+    schedule.reset()
+    assert gaps(3, recovering=True)[1:] == [params.recover_retry] * 2

@@ -33,6 +33,7 @@ from spectral_vs.servo.records import (
 from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.relocalization import Relocalization
 from spectral_vs.servo.scale import resolve_scale
+from spectral_vs.servo.schedule import RelocalizationSchedule
 from spectral_vs.servo.settings import ServoParams
 from spectral_vs.servo.stop import StopRule
 
@@ -105,6 +106,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._recovery = Recovery.of(self._reference_view, self.params, self._prepare)
         self._stop_rule = StopRule(self.params)
         self._arrival = ArrivalCheck(self.params)
+        self._schedule = RelocalizationSchedule(self.params)
         self.reset()
 
     def reset(self) -> None:
@@ -269,8 +271,7 @@ class SpectralServo(SensorFaults, Relocalization):
         relocalize = self.params.relocalization.relocalize
         if relocalize and not self._anchored:
             cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry)
-        if self._since_relocalization is not None:
-            self._since_relocalization += 1
+        self._schedule.step()
         if relocalize and self._lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
             motion = self._motion
@@ -415,10 +416,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._clock.usable(now)
         self._armed = self._armed or record.visible_fitness >= self.params.watchdog.watchdog_fitness
         self._lost = not record.score >= self.params.relocalization.relocalize_fitness
-        if record.relocalized:
-            self._confirmed = not self._lost
-        if not self._lost:
-            self._unconfirmed = 0
+        self._schedule.accepted(record.relocalized, not self._lost)
 
     def _command(self, T: np.ndarray, record: ServoRecord) -> None:
         """The stop rule with its hysteresis, else the twist toward ``T``."""

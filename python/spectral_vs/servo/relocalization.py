@@ -25,22 +25,8 @@ class Relocalization(ControllerState):
     base class of it: they read and keep the controller's state)."""
 
     def _relocalization_due(self) -> bool:
-        """Whether a relocalization may run now: none was tried yet, or the last was
-        ``relocalize_interval`` steps ago (when it was not confirmed, ``relocalize_retry``
-        grown by ``relocalize_backoff`` per unconfirmed one in a row before it; while
-        recovering, ``relocalize_retry``: the recovery widens the view at every step)."""
-        since = self._since_relocalization
-        p = self.params
-        if since is None:
-            return True
-        if self._confirmed:
-            return since >= p.relocalization.relocalize_interval
-        if self._recovering():
-            return since >= p.recovery.recover_retry
-        growth = p.relocalization.relocalize_backoff ** max(0, self._unconfirmed - 1)
-        return since >= min(
-            p.relocalization.relocalize_interval, p.relocalization.relocalize_retry * growth
-        )
+        """Whether a relocalization may run now (:meth:`RelocalizationSchedule.due`)."""
+        return self._schedule.due(self._recovering())
 
     def _field_score(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
         """``fitness`` over the share of the reference that ``T`` puts inside the field of
@@ -66,11 +52,9 @@ class Relocalization(ControllerState):
         # estimate of the local step alone far from the goal is no prior worth refining).
         # An estimate never confirmed since it was taken is no prior: kept over the search,
         # a wrong pose that tracked poorly was taken again at every relocalization.
-        trusted = self._anchored and self._confirmed
+        trusted = self._anchored and self._schedule.confirmed
         prior = None if self._previous is None or not trusted else self._predicted(motion)
-        self._since_relocalization = 0
-        self._confirmed = False
-        self._unconfirmed += 1  # until the step confirms it
+        self._schedule.tried()
         if not cloud.has_normals:  # an (N, 3) capture: the downsampled cloud's normals
             cloud = self._prepare(cloud, "current")
         result = _align_views(self._reference_view, cloud, self._view_params, prior)
@@ -113,9 +97,7 @@ class Relocalization(ControllerState):
         self._armed = False
         self._anchored = False
         self._lost = True
-        self._since_relocalization = None
-        self._confirmed = False
-        self._unconfirmed = 0
+        self._schedule.reset()
         self._recovery.reset()
 
     def _recovering(self) -> bool:

@@ -14,6 +14,7 @@ from spectral_vs.servo.frames import StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
 from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.scale import ServoScale, crop_to_depth
+from spectral_vs.servo.schedule import RelocalizationSchedule
 from spectral_vs.servo.settings import ServoParams
 
 
@@ -35,6 +36,7 @@ class ControllerState:
     _stale_frames: StaleFrames  #: the last frame, for the stale-frame test
     _recovery: Recovery  #: the recovery, before the run's first estimate
     _arrival: ArrivalCheck  #: the estimates refuted on arrival
+    _schedule: RelocalizationSchedule  #: when the next global registration may run
 
     # What the controller remembers between steps (set by reset()).
     _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
@@ -44,9 +46,6 @@ class ControllerState:
     _anchored: bool  #: a global registration was taken: registrations warm-start
     _ever_anchored: bool  #: one was taken in this run (no recovery after it)
     _lost: bool  #: no trusted estimate: the next step relocalizes
-    _since_relocalization: int | None  #: steps since the last attempt
-    _confirmed: bool  #: the last relocalization was taken and confirmed
-    _unconfirmed: int  #: relocalizations in a row not confirmed (the backoff)
     _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
     _odometry: np.ndarray  #: T_first_current: the camera's motion since the first step
 
