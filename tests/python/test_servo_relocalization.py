@@ -159,8 +159,8 @@ def test_the_arrival_check_refutes_a_goal_that_fits_poorly():
     assert servo.previous_estimate is None and servo._lost
     far = np.eye(4)
     far[:3, 3] = (0.3, 0.0, 0.0)
-    assert servo._arrival.near_refuted(near_goal, servo._odometry)
-    assert not servo._arrival.near_refuted(far, servo._odometry)
+    assert servo._arrival.near_refuted(near_goal, servo._odometry.since_first)
+    assert not servo._arrival.near_refuted(far, servo._odometry.since_first)
 
 
 def test_a_refuted_goal_is_placed_by_the_odometry():

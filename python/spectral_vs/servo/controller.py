@@ -21,7 +21,7 @@ from spectral_vs.poses import pose_error
 from spectral_vs.registration import CloudLike, as_cloud
 from spectral_vs.servo.arrival import ArrivalCheck
 from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
-from spectral_vs.servo.frames import StaleFrames, StepClock
+from spectral_vs.servo.frames import Odometry, StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse
 from spectral_vs.servo.plane_turn import _PlaneTurn
 from spectral_vs.servo.records import (
@@ -84,6 +84,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self.reference = self._prepare(cloud, "reference")
         self._clock = StepClock()
         self._stale_frames = StaleFrames()
+        self._odometry = Odometry()
         # What the relocalization registers: the reference as captured, with its normals.
         self._reference_view = cloud if cloud.has_normals else self.reference
         # The reference's side of the registration (its EGI coefficients, centred points)
@@ -270,11 +271,11 @@ class SpectralServo(SensorFaults, Relocalization):
 
         relocalize = self.params.relocalization.relocalize
         if relocalize and not self._anchored:
-            cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry)
+            cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry.since_first)
         self._schedule.step()
         if relocalize and self._lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
-            motion = self._motion
+            motion = self._odometry.since_accepted
         if self._recovering():
             return self._recover(cloud, record, motion, now, start)
         if relocalize and not self._anchored:
@@ -412,7 +413,7 @@ class SpectralServo(SensorFaults, Relocalization):
         """Keep ``T`` as the previous estimate: the watchdog's and the warm start's memory,
         the outage's clock, the lock-on and whether the servo is lost."""
         self._previous = T
-        self._motion = np.eye(4)
+        self._odometry.accepted()
         self._clock.usable(now)
         self._armed = self._armed or record.visible_fitness >= self.params.watchdog.watchdog_fitness
         self._lost = not record.score >= self.params.relocalization.relocalize_fitness

@@ -106,8 +106,7 @@ class SensorFaults(ControllerState):
         """Forget what the fault tests remember: the camera's motion since the last accepted
         step (and since the first, the arrival check's odometry), the last frame and stamp,
         and the clock's last step and usable frame."""
-        self._motion = np.eye(4)  # T_accepted_current: since the last accepted step
-        self._odometry = np.eye(4)  # T_first_current: since the first step
+        self._odometry.reset()
         self._stale_frames.reset()
         self._clock.reset()
 
@@ -117,10 +116,9 @@ class SensorFaults(ControllerState):
         came first; return the first (``T_accepted_current``)."""
         if T_previous_current is not None:
             step = _motion_step(T_previous_current)
-            self._motion = self._motion @ step
-            self._odometry = self._odometry @ step
+            self._odometry.carry(step)
             self._stale_frames.moved(step)
-        return self._motion
+        return self._odometry.since_accepted
 
     def _hold(
         self,

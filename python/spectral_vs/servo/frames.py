@@ -1,5 +1,6 @@
-"""Two parts of the servo that own their state: the clock of its steps, with the outage it
-measures (how long since the last usable frame), and the memory of the last frame, which
+"""Three parts of the servo that own their state, what it knows of its camera between
+frames: the clock of its steps, with the outage it measures (how long since the last usable
+frame); the camera's measured motion (its odometry); and the memory of the last frame, which
 tells a stale frame from a still camera's."""
 
 from __future__ import annotations
@@ -78,6 +79,30 @@ class StepClock:
             )
         else:
             record.status = ServoStatus("running", "", f"holding ({hold}): {message}")
+
+
+class Odometry:
+    """The camera's measured motion (the robot's forward kinematics, step by step): since
+    the last accepted estimate, ``T_accepted_current``, which carries that estimate to the
+    current frame; and since the run's first step, ``T_first_current``, the frame in which
+    the recovery's plane and the refuted goals are kept."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: no motion."""
+        self.since_accepted = np.eye(4)  #: T_accepted_current
+        self.since_first = np.eye(4)  #: T_first_current
+
+    def carry(self, step: np.ndarray) -> None:
+        """The camera moved by ``step`` (T_previous_current) since the last step."""
+        self.since_accepted = self.since_accepted @ step
+        self.since_first = self.since_first @ step
+
+    def accepted(self) -> None:
+        """This step's estimate was accepted: the motion since it starts afresh."""
+        self.since_accepted = np.eye(4)
 
 
 class StaleFrames:

@@ -71,13 +71,17 @@ class Relocalization(ControllerState):
         )
         # Only the answer the verdict vouches for: never an alternative it did not judge,
         # nor a pose the arrival check refuted.
-        if not result.reliable or score < least or self._arrival.near_refuted(T, self._odometry):
+        if (
+            not result.reliable
+            or score < least
+            or self._arrival.near_refuted(T, self._odometry.since_first)
+        ):
             self._recovery.failed(self._recovering(), record)
             return
         self._recovery.reset()
         record.relocalized = True
         self._previous = T
-        self._motion = np.eye(4)
+        self._odometry.accepted()
         self._anchored = True
         self._ever_anchored = True
         self._lost = False
@@ -87,7 +91,7 @@ class Relocalization(ControllerState):
         ``T`` it refutes is forgotten, and the next step relocalizes."""
         if not self.params.relocalization.relocalize:
             return
-        if self._arrival.refutes(T, record, self._odometry):
+        if self._arrival.refutes(T, record, self._odometry.since_first):
             self._forget_estimate()
 
     def _forget_estimate(self) -> None:
@@ -117,7 +121,7 @@ class Relocalization(ControllerState):
         the view's overlap with the reference, or the stop ``"lost"``; no registration
         runs."""
         self._clock.usable(now)  # the frame was usable: no sensor outage
-        T = self._recovery.step(cloud, record, motion, self._odometry)
+        T = self._recovery.step(cloud, record, motion, self._odometry.since_first)
         if T is not None:
             record.twist, record.saturation = self.twist(T)
         record.seconds = time.perf_counter() - start

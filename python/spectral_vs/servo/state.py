@@ -10,7 +10,7 @@ from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_d
 from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import prepare
 from spectral_vs.servo.arrival import ArrivalCheck
-from spectral_vs.servo.frames import StaleFrames, StepClock
+from spectral_vs.servo.frames import Odometry, StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
 from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.scale import ServoScale, crop_to_depth
@@ -34,6 +34,7 @@ class ControllerState:
     _occlusion_reference: np.ndarray  #: a strided subsample of the reference's points
     _clock: StepClock  #: the steps' times and the outage
     _stale_frames: StaleFrames  #: the last frame, for the stale-frame test
+    _odometry: Odometry  #: the camera's measured motion
     _recovery: Recovery  #: the recovery, before the run's first estimate
     _arrival: ArrivalCheck  #: the estimates refuted on arrival
     _schedule: RelocalizationSchedule  #: when the next global registration may run
@@ -46,8 +47,6 @@ class ControllerState:
     _anchored: bool  #: a global registration was taken: registrations warm-start
     _ever_anchored: bool  #: one was taken in this run (no recovery after it)
     _lost: bool  #: no trusted estimate: the next step relocalizes
-    _motion: np.ndarray  #: T_accepted_current: the camera's motion since the last accepted step
-    _odometry: np.ndarray  #: T_first_current: the camera's motion since the first step
 
     def _crop(self, cloud: PointCloud) -> PointCloud:
         """The points within ``max_depth`` of the camera (along its optical axis)."""
