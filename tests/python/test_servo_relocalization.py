@@ -19,6 +19,7 @@ from spectral_vs.servo import (
     start_poses,
 )
 from spectral_vs.servo.arrival import ArrivalCheck
+from spectral_vs.servo.estimate import TrackedEstimate
 from spectral_vs.servo.schedule import RelocalizationSchedule
 
 sim = pytest.importorskip("spectral_vs.sim")
@@ -153,10 +154,10 @@ def test_the_arrival_check_refutes_a_goal_that_fits_poorly():
         record = _empty_record(k, 1000)
         record.translation_error, record.rotation_error = 0.002, 0.0
         record.visible_fitness = p.refute_fitness - 0.1
-        servo._previous = near_goal
+        servo._tracked.previous = near_goal
         servo._check_arrival(near_goal, record)
         assert record.refuted == (k == p.refute_steps - 1)
-    assert servo.previous_estimate is None and servo._lost
+    assert servo.previous_estimate is None and servo._tracked.lost
     far = np.eye(4)
     far[:3, 3] = (0.3, 0.0, 0.0)
     assert servo._arrival.near_refuted(near_goal, servo._odometry.since_first)
@@ -379,3 +380,26 @@ def test_the_schedule_spaces_unconfirmed_relocalizations_2_4_8_10_steps():
     assert gaps(2) == [10, 2]  # then lost again: retried after 2 (no backoff yet)
     schedule.reset()
     assert gaps(3, recovering=True)[1:] == [params.recover_retry] * 2
+
+
+def test_the_tracked_estimate_keeps_its_trust_and_carries_the_pose():
+    """The estimate part alone: a taken global registration anchors it (and counts for the
+    run), a poor step loses it without disarming the watchdog, forgetting keeps the run's
+    memory that one was taken and a reset clears it; the estimate is carried by the inverse
+    of the camera's motion."""
+    tracked = TrackedEstimate()
+    assert tracked.lost and not tracked.locked and tracked.previous is None
+    T = np.eye(4)
+    T[:3, 3] = (0.1, 0.0, 0.0)
+    tracked.take(T)
+    assert tracked.anchored and tracked.ever_anchored and not tracked.lost and tracked.locked
+    tracked.accept(T, arms=True, trusted=True)
+    tracked.accept(T, arms=False, trusted=False)
+    assert tracked.armed and tracked.lost
+    motion = np.eye(4)
+    motion[:3, 3] = (0.04, 0.0, 0.0)  # the camera moved 4 cm toward the goal
+    assert tracked.predicted(motion)[:3, 3] == pytest.approx([0.06, 0.0, 0.0], abs=1e-12)
+    tracked.forget()
+    assert tracked.previous is None and not tracked.locked and tracked.ever_anchored
+    tracked.reset()
+    assert not tracked.ever_anchored

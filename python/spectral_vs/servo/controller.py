@@ -20,6 +20,7 @@ from spectral_vs._core import (
 from spectral_vs.poses import pose_error
 from spectral_vs.registration import CloudLike, as_cloud
 from spectral_vs.servo.arrival import ArrivalCheck
+from spectral_vs.servo.estimate import TrackedEstimate
 from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
 from spectral_vs.servo.frames import Odometry, StaleFrames, StepClock
 from spectral_vs.servo.law import _rigid_inverse
@@ -85,6 +86,7 @@ class SpectralServo(SensorFaults, Relocalization):
         self._clock = StepClock()
         self._stale_frames = StaleFrames()
         self._odometry = Odometry()
+        self._tracked = TrackedEstimate()
         # What the relocalization registers: the reference as captured, with its normals.
         self._reference_view = cloud if cloud.has_normals else self.reference
         # The reference's side of the registration (its EGI coefficients, centred points)
@@ -115,11 +117,11 @@ class SpectralServo(SensorFaults, Relocalization):
         servo converged (``ServoParams.reengage_translation``) and what the fault tests
         remember (the last frame, the outage's start)."""
         self._forget_estimate()
+        self._tracked.reset()  # and no global registration taken in this run
         self._steps = 0
         self._last_turn = 0.0
         self._arrival.reset()
         self._stop_rule.reset()
-        self._ever_anchored = False
         self._reset_faults()
 
     @property
@@ -137,7 +139,8 @@ class SpectralServo(SensorFaults, Relocalization):
     @property
     def previous_estimate(self) -> np.ndarray | None:
         """The last accepted ``T_current_desired`` (None before the first step)."""
-        return None if self._previous is None else self._previous.copy()
+        previous = self._tracked.previous
+        return None if previous is None else previous.copy()
 
     def estimate(
         self, current: CloudLike, initial_guess: np.ndarray | None = None
@@ -270,15 +273,15 @@ class SpectralServo(SensorFaults, Relocalization):
             return self._hold(record, "occluded", outage, now, start)
 
         relocalize = self.params.relocalization.relocalize
-        if relocalize and not self._anchored:
+        if relocalize and not self._tracked.anchored:
             cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry.since_first)
         self._schedule.step()
-        if relocalize and self._lost and self._relocalization_due():
+        if relocalize and self._tracked.lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
             motion = self._odometry.since_accepted
         if self._recovering():
             return self._recover(cloud, record, motion, now, start)
-        if relocalize and not self._anchored:
+        if relocalize and not self._tracked.anchored:
             # No estimate the verdict vouched for: the local registration from the
             # identity is unchecked, and is not turned into motion.
             return self._hold(record, "unreliable", self._unreliable_message(record), now, start)
@@ -331,7 +334,7 @@ class SpectralServo(SensorFaults, Relocalization):
             # (the camera or the scene jumped): the full search decides, and the watchdog
             # sees the jump. Before, a poor fit is the relocalization's to judge.
             visible = result.fitness / max(1.0 - hidden, 1e-9)
-            tracking = not self._armed or visible >= self.params.watchdog.watchdog_fitness
+            tracking = not self._tracked.armed or visible >= self.params.watchdog.watchdog_fitness
         if not tracking:
             scene, result = self._register(cloud, guess, self._aligner)
         record.tracking = tracking
@@ -346,7 +349,9 @@ class SpectralServo(SensorFaults, Relocalization):
         confidence and Algorithm 1's figures."""
         p = self.params
         guess = None
-        if (p.registration.warm_start or self._anchored) and self._previous is not None:
+        if (
+            p.registration.warm_start or self._tracked.anchored
+        ) and self._tracked.previous is not None:
             guess = self._predicted(motion)
         scene, result = self._registration(cloud, record, guess, motion, hidden)
         last = result.history[-1] if len(result.history) else None
@@ -360,7 +365,7 @@ class SpectralServo(SensorFaults, Relocalization):
         # to step. The last good estimate carried along the camera's measured motion is the
         # estimate while the fitness is under watchdog_fitness, before lock-on and after.
         record.carried = (
-            self._anchored
+            self._tracked.anchored
             and guess is not None
             and record.visible_fitness < p.watchdog.watchdog_fitness
         )
@@ -412,12 +417,12 @@ class SpectralServo(SensorFaults, Relocalization):
     def _accept(self, T: np.ndarray, record: ServoRecord, now: float) -> None:
         """Keep ``T`` as the previous estimate: the watchdog's and the warm start's memory,
         the outage's clock, the lock-on and whether the servo is lost."""
-        self._previous = T
+        p = self.params
+        arms = record.visible_fitness >= p.watchdog.watchdog_fitness
+        self._tracked.accept(T, arms, record.score >= p.relocalization.relocalize_fitness)
         self._odometry.accepted()
         self._clock.usable(now)
-        self._armed = self._armed or record.visible_fitness >= self.params.watchdog.watchdog_fitness
-        self._lost = not record.score >= self.params.relocalization.relocalize_fitness
-        self._schedule.accepted(record.relocalized, not self._lost)
+        self._schedule.accepted(record.relocalized, not self._tracked.lost)
 
     def _command(self, T: np.ndarray, record: ServoRecord) -> None:
         """The stop rule with its hysteresis, else the twist toward ``T``."""
@@ -433,8 +438,8 @@ class SpectralServo(SensorFaults, Relocalization):
         the predicted estimate moves the reference's centroid by at most half of it from
         the registration's start ``guess`` (identity when None); ``motion`` as for
         :meth:`_predicted`."""
-        locked = self._armed or self._anchored
-        if self._tracking_aligner is None or not locked or self._previous is None:
+        locked = self._tracked.locked
+        if self._tracking_aligner is None or not locked or self._tracked.previous is None:
             return False
         predicted = self._predicted(motion)
         start = np.eye(4) if guess is None else np.asarray(guess, dtype=float)
@@ -445,7 +450,7 @@ class SpectralServo(SensorFaults, Relocalization):
     def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
         """A message when ``T`` is implausibly far from the previous estimate carried along
         ``motion`` (as for :meth:`_predicted`), else None."""
-        if self._previous is None or not self._armed:
+        if self._tracked.previous is None or not self._tracked.armed:
             return None
         predicted = self._predicted(motion)
         # |translation| of predicted^-1 T is |t - t_predicted|: the two parts are independent.

@@ -65,9 +65,11 @@ class SensorFaults(ControllerState):
         p = self.params
         # From the first occluded frame on, once the servo has an estimate it vouches for:
         # a relocalization taken, or the lock-on.
-        trusted = self._armed or self._anchored
+        trusted = self._tracked.locked
         if not (
-            trusted and self._previous is not None and math.isfinite(p.faults.occlusion_margin)
+            trusted
+            and self._tracked.previous is not None
+            and math.isfinite(p.faults.occlusion_margin)
         ):
             return cloud, False, 0.0, None
         points = len(cloud)

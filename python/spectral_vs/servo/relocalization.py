@@ -52,8 +52,8 @@ class Relocalization(ControllerState):
         # estimate of the local step alone far from the goal is no prior worth refining).
         # An estimate never confirmed since it was taken is no prior: kept over the search,
         # a wrong pose that tracked poorly was taken again at every relocalization.
-        trusted = self._anchored and self._schedule.confirmed
-        prior = None if self._previous is None or not trusted else self._predicted(motion)
+        trusted = self._tracked.anchored and self._schedule.confirmed
+        prior = None if self._tracked.previous is None or not trusted else self._predicted(motion)
         self._schedule.tried()
         if not cloud.has_normals:  # an (N, 3) capture: the downsampled cloud's normals
             cloud = self._prepare(cloud, "current")
@@ -80,11 +80,8 @@ class Relocalization(ControllerState):
             return
         self._recovery.reset()
         record.relocalized = True
-        self._previous = T
+        self._tracked.take(T)
         self._odometry.accepted()
-        self._anchored = True
-        self._ever_anchored = True
-        self._lost = False
 
     def _check_arrival(self, T: np.ndarray, record: ServoRecord) -> None:
         """The arrival check (:class:`~spectral_vs.servo.arrival.ArrivalCheck`): an estimate
@@ -97,17 +94,14 @@ class Relocalization(ControllerState):
     def _forget_estimate(self) -> None:
         """Forget the estimate and everything learnt about it: the watchdog's lock-on, the
         relocalizations tried and the recovery; the next step relocalizes."""
-        self._previous = None
-        self._armed = False
-        self._anchored = False
-        self._lost = True
+        self._tracked.forget()
         self._schedule.reset()
         self._recovery.reset()
 
     def _recovering(self) -> bool:
         """Whether this step recovers (:meth:`Recovery.due`): no global registration was
         taken in this run and the last ``recover_after`` ones failed."""
-        return self._recovery.due(self._anchored or self._ever_anchored)
+        return self._recovery.due(self._tracked.anchored or self._tracked.ever_anchored)
 
     def _recover(
         self,

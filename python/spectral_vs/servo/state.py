@@ -10,8 +10,9 @@ from spectral_vs._core import ModelAligner, PointCloud, ViewAlignParams, voxel_d
 from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import prepare
 from spectral_vs.servo.arrival import ArrivalCheck
+from spectral_vs.servo.estimate import TrackedEstimate
 from spectral_vs.servo.frames import Odometry, StaleFrames, StepClock
-from spectral_vs.servo.law import _rigid_inverse, _saturated_twist
+from spectral_vs.servo.law import _saturated_twist
 from spectral_vs.servo.recovery import Recovery
 from spectral_vs.servo.scale import ServoScale, crop_to_depth
 from spectral_vs.servo.schedule import RelocalizationSchedule
@@ -19,9 +20,13 @@ from spectral_vs.servo.settings import ServoParams
 
 
 class ControllerState:
-    """The base of :class:`~spectral_vs.servo.SpectralServo` and of its parts
-    (:class:`~spectral_vs.servo.faults.SensorFaults`,
-    :class:`~spectral_vs.servo.relocalization.Relocalization`)."""
+    """The base of :class:`~spectral_vs.servo.SpectralServo` and of the two files its step
+    is split over (:class:`~spectral_vs.servo.faults.SensorFaults`,
+    :class:`~spectral_vs.servo.relocalization.Relocalization`): the reference's prepared
+    sides, and the parts that own what the servo remembers between steps (each with its
+    own state and methods: the clock, the odometry, the last frame, the estimate held, the
+    recovery, the arrival check, the relocalizations' schedule, and in the controller the
+    stop rule). Only the step count and the last plane turn are kept here."""
 
     params: ServoParams  #: the settings with every scale length resolved
     scale: ServoScale  #: the scale lengths resolved, and the reference's extent
@@ -35,18 +40,14 @@ class ControllerState:
     _clock: StepClock  #: the steps' times and the outage
     _stale_frames: StaleFrames  #: the last frame, for the stale-frame test
     _odometry: Odometry  #: the camera's measured motion
+    _tracked: TrackedEstimate  #: the estimate held and the trust in it
     _recovery: Recovery  #: the recovery, before the run's first estimate
     _arrival: ArrivalCheck  #: the estimates refuted on arrival
     _schedule: RelocalizationSchedule  #: when the next global registration may run
 
     # What the controller remembers between steps (set by reset()).
-    _previous: np.ndarray | None  #: the last accepted estimate, T_current_desired
-    _armed: bool  #: the watchdog is armed (a fitness of watchdog_fitness was reached)
     _steps: int
     _last_turn: float  #: the plane turn of the last estimate, rad
-    _anchored: bool  #: a global registration was taken: registrations warm-start
-    _ever_anchored: bool  #: one was taken in this run (no recovery after it)
-    _lost: bool  #: no trusted estimate: the next step relocalizes
 
     def _crop(self, cloud: PointCloud) -> PointCloud:
         """The points within ``max_depth`` of the camera (along its optical axis)."""
@@ -62,12 +63,8 @@ class ControllerState:
         return prepare(cloud, argument, self.params.registration.voxel_size, False, (0, 0, 0))
 
     def _predicted(self, motion: np.ndarray | None) -> np.ndarray:
-        """The previous (last accepted) estimate carried along the camera's motion since
-        that step, ``motion`` = ``T_accepted_current`` (None: the camera is taken as still)."""
-        assert self._previous is not None
-        if motion is None:
-            return self._previous
-        return _rigid_inverse(np.asarray(motion, dtype=float)) @ self._previous
+        """The estimate carried along ``motion`` (:meth:`TrackedEstimate.predicted`)."""
+        return self._tracked.predicted(motion)
 
     def twist(self, T_current_desired: np.ndarray) -> tuple[np.ndarray, float]:
         """The decoupled law and its saturation.
