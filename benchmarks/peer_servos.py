@@ -45,7 +45,7 @@ from spectral_vs.servo.records import (
     _empty_record,
     _too_few_points,
 )
-from spectral_vs.servo.stages import _check_positive
+from spectral_vs.servo.stage_settings import _check_positive
 
 InteractionKind = Literal["current", "desired", "mean"]
 RegistrationMethod = Literal["icp", "fpfh"]

@@ -79,7 +79,7 @@ from test_servo import FreeCamera, FreeCameraKinematics, camera_pose, table_top,
 
 import spectral_vs as svs  # noqa: E402
 from spectral_vs.servo import records as servo_records  # noqa: E402
-from spectral_vs.servo import stages as servo_stages  # noqa: E402
+from spectral_vs.servo import stage_settings as servo_stages  # noqa: E402
 
 #: What one call may take: seconds of wall time, megabytes of resident memory over what the
 #: process held before it (as in test_properties.py's harness of cloud_from_depth).
@@ -816,7 +816,7 @@ def servo_fields() -> dict[str, Any]:
 
 
 #: A table drawn from: every integer setting of the servo, by name, with its documented
-#: lower bound (the checks of spectral_vs.servo.stages).
+#: lower bound (the checks of spectral_vs.servo.stage_settings).
 INT_BOUNDS.update(
     {
         "min_points": (1,),

@@ -71,7 +71,7 @@ from spectral_vs.servo.records import (
 from spectral_vs.servo.relocalization import field_share
 from spectral_vs.servo.scale import ServoScale
 from spectral_vs.servo.settings import ServoParams
-from spectral_vs.servo.stages import (
+from spectral_vs.servo.stage_settings import (
     FaultParams,
     LawParams,
     PlaneTurnParams,

@@ -1,7 +1,7 @@
 """Settings of the servo (:class:`ServoParams`), grouped by the stage they set: the
 registration, the control law, the stop rule, the watchdog, the sensor faults, the
-relocalization, the recovery and the plane turn (:mod:`spectral_vs.servo.stages`). Every
-setting is also a keyword and an attribute of :class:`ServoParams` itself
+relocalization, the recovery and the plane turn (:mod:`spectral_vs.servo.stage_settings`).
+Every setting is also a keyword and an attribute of :class:`ServoParams` itself
 (``ServoParams(max_outage=0.3)``, ``params.max_outage``)."""
 
 from __future__ import annotations
@@ -15,19 +15,28 @@ from typing import Any
 import numpy as np
 
 from spectral_vs._core import AlignParams
-from spectral_vs.servo import stages
-from spectral_vs.servo.stages import _check_keys
+from spectral_vs.servo.stage_settings import (
+    FaultParams,
+    LawParams,
+    PlaneTurnParams,
+    RecoveryParams,
+    RegistrationParams,
+    RelocalizationParams,
+    StopParams,
+    WatchdogParams,
+    _check_keys,
+)
 
 #: The groups of :class:`ServoParams`: attribute name and settings type.
 _GROUPS: dict[str, type] = {
-    "registration": stages.RegistrationParams,
-    "law": stages.LawParams,
-    "stop": stages.StopParams,
-    "watchdog": stages.WatchdogParams,
-    "faults": stages.FaultParams,
-    "relocalization": stages.RelocalizationParams,
-    "recovery": stages.RecoveryParams,
-    "plane": stages.PlaneTurnParams,
+    "registration": RegistrationParams,
+    "law": LawParams,
+    "stop": StopParams,
+    "watchdog": WatchdogParams,
+    "faults": FaultParams,
+    "relocalization": RelocalizationParams,
+    "recovery": RecoveryParams,
+    "plane": PlaneTurnParams,
 }
 #: The group of every setting, by its name.
 _GROUP_OF: dict[str, str] = {
@@ -66,14 +75,14 @@ class ServoParams:
         The plane turn and the dominant plane.
     """
 
-    registration: stages.RegistrationParams = field(default_factory=stages.RegistrationParams)
-    law: stages.LawParams = field(default_factory=stages.LawParams)
-    stop: stages.StopParams = field(default_factory=stages.StopParams)
-    watchdog: stages.WatchdogParams = field(default_factory=stages.WatchdogParams)
-    faults: stages.FaultParams = field(default_factory=stages.FaultParams)
-    relocalization: stages.RelocalizationParams = field(default_factory=stages.RelocalizationParams)
-    recovery: stages.RecoveryParams = field(default_factory=stages.RecoveryParams)
-    plane: stages.PlaneTurnParams = field(default_factory=stages.PlaneTurnParams)
+    registration: RegistrationParams = field(default_factory=RegistrationParams)
+    law: LawParams = field(default_factory=LawParams)
+    stop: StopParams = field(default_factory=StopParams)
+    watchdog: WatchdogParams = field(default_factory=WatchdogParams)
+    faults: FaultParams = field(default_factory=FaultParams)
+    relocalization: RelocalizationParams = field(default_factory=RelocalizationParams)
+    recovery: RecoveryParams = field(default_factory=RecoveryParams)
+    plane: PlaneTurnParams = field(default_factory=PlaneTurnParams)
 
     def __init__(self, **settings: Any) -> None:
         flat: dict[str, dict[str, Any]] = {group: {} for group in _GROUPS}
