@@ -1549,6 +1549,17 @@ def _covariance_inflation(probe: Probe, data: Any) -> None:
     probe("covariance_inflation", svs.covariance_inflation, kind)
 
 
+@entry("calibrated_confidence")
+def _calibrated_confidence(probe: Probe, data: Any) -> None:
+    kind = data.draw(
+        st.one_of(
+            st.sampled_from(["align", "views", "servo", "servo_carried", "", "x" * 1000]), wrong
+        )
+    )
+    score = data.draw(st.one_of(st.floats(allow_nan=True, allow_infinity=True), wrong))
+    probe("calibrated_confidence", svs.calibrated_confidence, score, kind)
+
+
 @entry("pose_covariance")
 def _pose_covariance(probe: Probe, data: Any) -> None:
     F = fixtures()
