@@ -284,3 +284,24 @@ def test_near_occluders_and_the_fingerprint():
     nudged = current.copy()
     nudged[123, 0] += 1e-9
     assert frame_fingerprint(nudged) != frame_fingerprint(current)
+
+
+def test_a_view_emptied_by_what_stands_above_the_scene_holds_and_never_raises(scene, desired):
+    """Before an estimate, the points above the scene's plane are dropped: when they are the
+    whole view (a large start of seed 201 on the iiwa, whose first-found plane left nothing,
+    raised ValueError in the relocalization), the step holds as occluded and the servo
+    stops with sensor_outage past max_outage, raising nothing."""
+    servo = SpectralServo(view(scene, desired))
+    assert servo.params.relocalize
+
+    def everything_above(cloud, record, odometry):
+        record.occluded_points = len(cloud)
+        return cloud.select(np.zeros(len(cloud), dtype=bool))
+
+    servo._recovery.drop_above_the_scene = everything_above  # type: ignore[method-assign]
+    current = view(scene, camera_pose((0.03, 0.02, -0.02), (-2.0, 3.0, -4.0)))
+    for k in range(7):
+        twist, status, record = servo.step_record(current, np.eye(4), now=0.1 * k)
+        assert record.hold == "occluded" and not twist.any()
+        assert "0 points remain" in status.message
+    assert status.state == "stopped" and status.reason == "sensor_outage"

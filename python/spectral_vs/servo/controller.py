@@ -275,6 +275,16 @@ class SpectralServo(SensorFaults, Relocalization):
         relocalize = self.params.relocalization.relocalize
         if relocalize and not self._tracked.anchored:
             cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry.since_first)
+            least = self.params.faults.min_points
+            if len(cloud) < least:
+                # What stands above the scene's plane fills the view: an outage, as an
+                # occluder over most of the view is (a start of the large set emptied its
+                # view so, and the relocalization raised on the empty cloud).
+                message = (
+                    f"{len(cloud)} points remain without {record.occluded_points} above the "
+                    f"scene's plane (min_points {least})"
+                )
+                return self._hold(record, "occluded", message, now, start)
         self._schedule.step()
         if relocalize and self._tracked.lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
