@@ -195,7 +195,16 @@ def run_robot(args: argparse.Namespace, robot_name: str, noisy: bool, chosen: li
                     if label != "dense depth" or scenario_name in DEPTH_SCENARIOS
                 ):
                     cell = (robot_name, name, seed, scenario_name, label)
+                    if args.resume and _done(run_file(*cell), args.starts):
+                        continue
                     run_cell(robot, refs, cell, starts)
+
+
+def _done(path: Path, starts: int) -> bool:
+    """Whether ``path`` holds a run of ``starts`` starts already (``--resume``)."""
+    if not path.is_file():
+        return False
+    return len(json.loads(path.read_text())["records"]) == starts
 
 
 def run_cell(robot: Any, refs: tuple, cell: tuple, starts: list) -> None:
@@ -356,6 +365,11 @@ def main() -> None:
         "--out",
         default=DEFAULT_OUT,
         help="folder of benchmarks/results for the run files (default %(default)s: the table)",
+    )
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="skip the cells whose run file already holds --starts starts (an interrupted run)",
     )
     parser.add_argument("--report-only", action="store_true")
     parser.add_argument("--figure", action="store_true", help=f"draw {FIGURE.name} and exit")
