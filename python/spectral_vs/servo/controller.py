@@ -280,11 +280,11 @@ class SpectralServo(SensorFaults, Relocalization):
                 # What stands above the scene's plane fills the view: an outage, as an
                 # occluder over most of the view is (a start of the large set emptied its
                 # view so, and the relocalization raised on the empty cloud).
-                message = (
+                emptied = (
                     f"{len(cloud)} points remain without {record.occluded_points} above the "
                     f"scene's plane (min_points {least})"
                 )
-                return self._hold(record, "occluded", message, now, start)
+                return self._hold(record, "occluded", emptied, now, start)
         self._schedule.step()
         if relocalize and self._tracked.lost and self._relocalization_due():
             self._relocalize(cloud, record, motion)
