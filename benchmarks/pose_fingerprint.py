@@ -102,12 +102,9 @@ def view_poses(pairs_per_scan: int) -> dict[str, list[str]]:
     return out
 
 
-#: The servo's runs: (robot, scenario); at most SERVO_STEPS steps each.
-SERVO_RUNS = tuple(
-    (robot, scenario)
-    for robot in ("iiwa", "panda")
-    for scenario in ("clean", "box_25cm_1s", "stray_points")
-)
+#: The servo's runs: every scenario on both arms, at most SERVO_STEPS steps each.
+SERVO_ROBOTS = ("iiwa", "panda")
+SERVO_SCENARIOS = ("clean", "box_25cm_1s", "stray_points")
 SERVO_STEPS = 60
 
 
@@ -119,7 +116,7 @@ def servo_steps(starts: int) -> dict[str, list[str]]:
     from spectral_vs.sim import scenarios
 
     out: dict[str, list[str]] = {}
-    for robot_name in ("iiwa", "panda"):
+    for robot_name in SERVO_ROBOTS:
         params = sim.SimParams(mode="kinematic", robot=sim.robot_model(robot_name))
         with sim.PyBulletRobot(params) as robot:
             T_reference, reference = robot.camera_pose(), robot.capture()
@@ -131,7 +128,7 @@ def servo_steps(starts: int) -> dict[str, list[str]]:
                     experiment.start_poses(robot.kinematics, name, starts, 33, home)
                 )
             ]
-            for scenario in (s for r, s in SERVO_RUNS if r == robot_name):
+            for scenario in SERVO_SCENARIOS:
                 for index, q in chosen:
                     _, log = scenarios.run_scenario(
                         robot, scenario, q, reference, T_reference, max_steps=SERVO_STEPS

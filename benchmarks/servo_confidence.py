@@ -34,11 +34,11 @@ import numpy as np
 import report as report_lib
 from report import auc, markdown, pct
 from verdict_benchmark import (
-    ECE_BINS,
-    _bins,
+    _f,
     calibrated,
     expected_calibration_error,
     fit_calibration,
+    reliability_panel,
 )
 
 import spectral_vs as svs
@@ -103,10 +103,6 @@ def metrics(conf: np.ndarray, right: np.ndarray, moved: np.ndarray) -> dict:
     }
 
 
-def _f(x: float | None, digits: int = 3) -> str:
-    return "-" if x is None else f"{x:.{digits}f}"
-
-
 def table(rows: list[tuple[str, dict]]) -> str:
     header = [
         "steps",
@@ -124,9 +120,7 @@ def table(rows: list[tuple[str, dict]]) -> str:
             f"{m['steps']} ({m['right']})",
             _f(m["auc"]),
             _f(m["ece"]),
-            pct(m["wrong_confident"])
-            if m["wrong_confident"] is None
-            else f"{100 * m['wrong_confident']:.2f}%",
+            "-" if m["wrong_confident"] is None else f"{100 * m['wrong_confident']:.2f}%",
             pct(m["right_confident"]),
             f"{m['moved']} ({m['wrong_moved']})",
             pct(m["moved_confident"]),
@@ -144,22 +138,7 @@ def plot(conf: np.ndarray, right: np.ndarray, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    ax.plot([0, 1], [0, 1], ":", color="grey", label="perfect calibration")
-    index = _bins(conf)
-    for b in np.unique(index):
-        sel = index == b
-        y = right[sel].mean()
-        ax.bar((b + 0.5) / ECE_BINS, y, width=0.9 / ECE_BINS, color="tab:blue", alpha=0.5)
-        ax.plot(conf[sel].mean(), y, "o", color="tab:red")
-        ax.annotate(str(int(sel.sum())), ((b + 0.5) / ECE_BINS, y), ha="center", va="bottom")
-    ax.set(
-        title=f"servo steps, validation ({len(conf)} steps)",
-        xlim=(0, 1),
-        ylim=(0, 1.1),
-        xlabel="confidence",
-        ylabel="share right",
-    )
-    ax.legend(loc="upper left", fontsize=8)
+    reliability_panel(ax, conf, right, f"servo steps, validation ({len(conf)} steps)")
     fig.tight_layout()
     report_lib.save_figure(fig, path)
 

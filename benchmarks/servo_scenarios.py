@@ -102,12 +102,11 @@ def set_output(name: str) -> None:
 def step_verdicts(log: servo_lib.ServoLog, reference: Any, T_reference: np.ndarray) -> dict:
     """Per step of a spectral run: the uncalibrated score, the calibrated confidence, whether
     the step moved on its estimate, whether the estimate was carried along the odometry
-    (not the registration's), the estimated distance to the goal (mm), and the estimate's
-    true error (mm, degrees; the translation at the reference's centroid) against the
-    camera pose of the step's frame."""
+    (not the registration's), and the estimate's true error (mm, degrees; the translation
+    at the reference's centroid) against the camera pose of the step's frame."""
     centroid = np.asarray(reference.points).mean(axis=0)
     rows: dict[str, list] = {
-        k: [] for k in ("score", "confidence", "moved", "carried", "goal_mm", "mm", "deg")
+        k: [] for k in ("score", "confidence", "moved", "carried", "mm", "deg")
     }
     for record in log.records:
         T_true = np.linalg.inv(record.T_base_camera) @ T_reference
@@ -116,7 +115,6 @@ def step_verdicts(log: servo_lib.ServoLog, reference: Any, T_reference: np.ndarr
         rows["confidence"].append(_rounded(record.confidence, 4))
         rows["moved"].append(bool(record.reliable and not record.hold))
         rows["carried"].append(bool(record.carried))
-        rows["goal_mm"].append(_rounded(1000.0 * record.translation_error, 1))
         rows["mm"].append(_rounded(error.translation_mm, 2))
         rows["deg"].append(_rounded(error.rotation_deg, 3))
     return rows

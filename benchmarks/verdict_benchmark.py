@@ -861,11 +861,10 @@ def write_doc(path: Path, text: str) -> bool:
     return report_lib.replace_block(path, MARKER, text)
 
 
-def _reliability_panel(ax, rows: list[dict], title: str) -> None:
+def reliability_panel(ax, conf: np.ndarray, right: np.ndarray, title: str) -> None:
     """Observed share right against the confidence of 10 equal bins, with counts."""
     ax.plot([0, 1], [0, 1], ":", color="grey", label="perfect calibration")
-    conf = np.array([r["confidence"] for r in rows])
-    right = np.array([r["right"] for r in rows], dtype=float)
+    right = np.asarray(right, dtype=float)
     index = _bins(conf)
     for b in np.unique(index):
         sel = index == b
@@ -896,7 +895,10 @@ def plot_reliability(rows_by_mode: dict[str, list[dict]], path: Path) -> None:
                 for r in rows_by_mode[mode]
                 if r["kind"] == kind and r.get("confidence") is not None
             ]
-            _reliability_panel(axes[i][j], rows, f"{kind}, {mode} ({len(rows)} answers)")
+            conf = np.array([r["confidence"] for r in rows])
+            right = np.array([r["right"] for r in rows])
+            title = f"{kind}, {mode} ({len(rows)} answers)"
+            reliability_panel(axes[i][j], conf, right, title)
     fig.tight_layout()
     report_lib.save_figure(fig, path)
 

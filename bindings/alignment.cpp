@@ -462,17 +462,7 @@ odometry). The maps are the isotonic regressions fitted on the calibration sets
 
   m.def(
       "covariance_inflation",
-      [](const std::string& kind) {
-        const RegistrationKind chosen = registration_kind(kind);
-        if (chosen != RegistrationKind::model_to_scene &&
-            chosen != RegistrationKind::view_to_view) {
-          throw std::invalid_argument(
-              "kind must be 'align' or 'views' (the servo's steps have "
-              "no covariance), got '" +
-              kind + "'");
-        }
-        return covariance_inflation(chosen);
-      },
+      [](const std::string& kind) { return covariance_inflation(registration_kind(kind)); },
       py::arg("kind"),
       "The inflation k of the covariance of align() ('align') or align_views() ('views'), "
       "fitted on the calibration set (docs/trust.md).");

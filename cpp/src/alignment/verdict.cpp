@@ -35,7 +35,10 @@ struct Knot {
 #include "alignment/calibration_maps.inc"
 #include "alignment/normal_directions.hpp"
 
-double interpolate(const Knot* first, const Knot* last, double score) {
+template <std::size_t N>
+double interpolate(const Knot (&map)[N], double score) {
+  const Knot* first = std::begin(map);
+  const Knot* last = std::end(map);
   if (score <= first->score) return first->probability;
   const Knot* upper = std::upper_bound(first, last, score,
                                        [](double s, const Knot& knot) { return s < knot.score; });
@@ -45,27 +48,26 @@ double interpolate(const Knot* first, const Knot* last, double score) {
   return lower.probability + share * (upper->probability - lower.probability);
 }
 
+// The calibration map of `kind` at `score` (in [0, 1]).
+double map_probability(RegistrationKind kind, double score) {
+  switch (kind) {
+    case RegistrationKind::model_to_scene:
+      return interpolate(kObjectMap, score);
+    case RegistrationKind::view_to_view:
+      return interpolate(kViewMap, score);
+    case RegistrationKind::servo_step:
+      return interpolate(kServoMap, score);
+    case RegistrationKind::servo_carried:
+      return interpolate(kServoCarriedMap, score);
+  }
+  return 0.0;
+}
+
 }  // namespace
 
 double calibrated_confidence(double score, RegistrationKind kind) {
   if (!std::isfinite(score)) return 0.0;
-  const double clamped = std::clamp(score, 0.0, 1.0);
-  double p = 0.0;
-  switch (kind) {
-    case RegistrationKind::model_to_scene:
-      p = interpolate(std::begin(kObjectMap), std::end(kObjectMap), clamped);
-      break;
-    case RegistrationKind::view_to_view:
-      p = interpolate(std::begin(kViewMap), std::end(kViewMap), clamped);
-      break;
-    case RegistrationKind::servo_step:
-      p = interpolate(std::begin(kServoMap), std::end(kServoMap), clamped);
-      break;
-    case RegistrationKind::servo_carried:
-      p = interpolate(std::begin(kServoCarriedMap), std::end(kServoCarriedMap), clamped);
-      break;
-  }
-  return std::clamp(p, 0.0, 1.0);
+  return std::clamp(map_probability(kind, std::clamp(score, 0.0, 1.0)), 0.0, 1.0);
 }
 
 double covariance_inflation(RegistrationKind kind) {
@@ -78,7 +80,9 @@ double covariance_inflation(RegistrationKind kind) {
     case RegistrationKind::servo_carried:
       break;
   }
-  detail::fail("covariance_inflation: the servo's steps have no covariance");
+  detail::fail(
+      "kind: the servo's steps have no covariance (only align() and align_views() "
+      "results have one)");
 }
 
 bool voxel_in_range(double voxel_size, double extent) {

@@ -275,15 +275,11 @@ class SpectralServo(SensorFaults, Relocalization):
         relocalize = self.params.relocalization.relocalize
         if relocalize and not self._tracked.anchored:
             cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry.since_first)
-            least = self.params.faults.min_points
-            if len(cloud) < least:
-                # What stands above the scene's plane fills the view: an outage, as an
-                # occluder over most of the view is (a start of the large set emptied its
-                # view so, and the relocalization raised on the empty cloud).
-                emptied = (
-                    f"{len(cloud)} points remain without {record.occluded_points} above the "
-                    f"scene's plane (min_points {least})"
-                )
+            # What stands above the scene's plane may fill the view: an outage, as an
+            # occluder over most of the view is (a start of the large set emptied its view
+            # so, and the relocalization raised on the empty cloud).
+            emptied = self._too_few_left(cloud, record, "above the scene's plane")
+            if emptied is not None:
                 return self._hold(record, "occluded", emptied, now, start)
         self._schedule.step()
         if relocalize and self._tracked.lost and self._relocalization_due():
@@ -362,7 +358,7 @@ class SpectralServo(SensorFaults, Relocalization):
         if (
             p.registration.warm_start or self._tracked.anchored
         ) and self._tracked.previous is not None:
-            guess = self._predicted(motion)
+            guess = self._tracked.predicted(motion)
         scene, result = self._registration(cloud, record, guess, motion, hidden)
         last = result.history[-1] if len(result.history) else None
         record.fitness = float(result.fitness)
@@ -447,11 +443,11 @@ class SpectralServo(SensorFaults, Relocalization):
         watchdog armed, or a relocalization taken), and
         the predicted estimate moves the reference's centroid by at most half of it from
         the registration's start ``guess`` (identity when None); ``motion`` as for
-        :meth:`_predicted`."""
+        :meth:`TrackedEstimate.predicted`."""
         locked = self._tracked.locked
         if self._tracking_aligner is None or not locked or self._tracked.previous is None:
             return False
-        predicted = self._predicted(motion)
+        predicted = self._tracked.predicted(motion)
         start = np.eye(4) if guess is None else np.asarray(guess, dtype=float)
         c = self._centroid
         moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
@@ -459,10 +455,10 @@ class SpectralServo(SensorFaults, Relocalization):
 
     def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
         """A message when ``T`` is implausibly far from the previous estimate carried along
-        ``motion`` (as for :meth:`_predicted`), else None."""
+        ``motion`` (as for :meth:`TrackedEstimate.predicted`), else None."""
         if self._tracked.previous is None or not self._tracked.armed:
             return None
-        predicted = self._predicted(motion)
+        predicted = self._tracked.predicted(motion)
         # |translation| of predicted^-1 T is |t - t_predicted|: the two parts are independent.
         moved, turned = pose_error(_rigid_inverse(predicted) @ T)
         p = self.params

@@ -19,7 +19,8 @@ class TrackedEstimate:
     def reset(self) -> None:
         """A new run: no estimate, none ever taken."""
         self.forget()
-        self.ever_anchored = False  #: a global registration was taken in this run
+        #: A global registration was taken in this run (``anchored`` implies it).
+        self.ever_anchored = False
 
     def forget(self) -> None:
         """No estimate: the next step relocalizes."""

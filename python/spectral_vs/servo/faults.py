@@ -76,7 +76,7 @@ class SensorFaults(ControllerState):
         mask, hidden = near_occluders(
             np.asarray(cloud.points),
             self._occlusion_reference,
-            self._predicted(motion),
+            self._tracked.predicted(motion),
             p.faults.occlusion_margin,
         )
         record.occluded_points = int(mask.sum())
@@ -88,11 +88,8 @@ class SensorFaults(ControllerState):
         # table as nearer than the reference) hide nothing to register: dropped, no hold.
         share = p.faults.occlusion_min_share
         occluded = record.occluded_points >= share * points and hidden >= share
-        if len(cloud) < p.faults.min_points:
-            message = (
-                f"{len(cloud)} points remain without {record.occluded_points} "
-                f"occluding ones (min_points {p.faults.min_points})"
-            )
+        message = self._too_few_left(cloud, record, "occluding ones")
+        if message is not None:
             return cloud, occluded, hidden, message
         if hidden > p.faults.occlusion_max_share:
             # Most of the reference is behind the occluder: an outage, not a new scene to
@@ -103,6 +100,18 @@ class SensorFaults(ControllerState):
             )
             return cloud, occluded, hidden, message
         return cloud, occluded, hidden, None
+
+    def _too_few_left(self, cloud: PointCloud, record: ServoRecord, dropped: str) -> str | None:
+        """Why the step holds when fewer than ``min_points`` of ``cloud`` remain once the
+        ``record.occluded_points`` points (what they are: ``dropped``) were dropped, else
+        None."""
+        least = self.params.faults.min_points
+        if len(cloud) >= least:
+            return None
+        return (
+            f"{len(cloud)} points remain without {record.occluded_points} {dropped} "
+            f"(min_points {least})"
+        )
 
     def _reset_faults(self) -> None:
         """Forget what the fault tests remember: the camera's motion since the last accepted

@@ -52,8 +52,9 @@ class Relocalization(ControllerState):
         # estimate of the local step alone far from the goal is no prior worth refining).
         # An estimate never confirmed since it was taken is no prior: kept over the search,
         # a wrong pose that tracked poorly was taken again at every relocalization.
-        trusted = self._tracked.anchored and self._schedule.confirmed
-        prior = None if self._tracked.previous is None or not trusted else self._predicted(motion)
+        tracked = self._tracked
+        trusted = tracked.anchored and self._schedule.confirmed and tracked.previous is not None
+        prior = tracked.predicted(motion) if trusted else None
         self._schedule.tried()
         if not cloud.has_normals:  # an (N, 3) capture: the downsampled cloud's normals
             cloud = self._prepare(cloud, "current")
@@ -101,7 +102,7 @@ class Relocalization(ControllerState):
     def _recovering(self) -> bool:
         """Whether this step recovers (:meth:`Recovery.due`): no global registration was
         taken in this run and the last ``recover_after`` ones failed."""
-        return self._recovery.due(self._tracked.anchored or self._tracked.ever_anchored)
+        return self._recovery.due(self._tracked.ever_anchored)
 
     def _recover(
         self,

@@ -62,10 +62,6 @@ class ControllerState:
             raise ValueError(f"{argument}: downsampling to {size} m: {error}") from error
         return prepare(cloud, argument, self.params.registration.voxel_size, False, (0, 0, 0))
 
-    def _predicted(self, motion: np.ndarray | None) -> np.ndarray:
-        """The estimate carried along ``motion`` (:meth:`TrackedEstimate.predicted`)."""
-        return self._tracked.predicted(motion)
-
     def twist(self, T_current_desired: np.ndarray) -> tuple[np.ndarray, float]:
         """The decoupled law and its saturation.
 

@@ -118,7 +118,7 @@ PoseCovariance pose_covariance(const PointCloud& model, const PointCloud& scene,
 /// The inflation k of the covariance, per kind: with it the mean normalised estimation
 /// error squared (NEES) of the right answers of the calibration set is 6 (docs/trust.md,
 /// "Covariance"). pose_covariance uses the model-to-scene one. Throws std::invalid_argument
-/// for RegistrationKind::servo_step, which has no covariance.
+/// for the servo's kinds (servo_step, servo_carried), which have no covariance.
 double covariance_inflation(RegistrationKind kind);
 
 }  // namespace spectral_vs
