@@ -141,10 +141,16 @@ def sim_params(robot: str) -> sim.SimParams:
     return sim.SimParams(mode="kinematic", robot=sim.robot_model(robot))
 
 
+def start_check(robot: sim.PyBulletRobot, name: str) -> Any:
+    """The start check of set ``name`` (``start_poses``'s ``accept``), as ``spectral-vs
+    servo-sim`` uses it: a view check for the sets with ``min_view_share``, else None."""
+    spec = experiment.START_SETS[name]
+    return robot.view_check(spec["min_view_share"]) if "min_view_share" in spec else None
+
+
 def starts(robot: sim.PyBulletRobot, name: str, count: int, seed: int) -> list[dict]:
     """The ``count`` seeded starts of set ``name``, as ``spectral-vs servo-sim`` draws them."""
-    spec = experiment.START_SETS[name]
-    accept = robot.view_check(spec["min_view_share"]) if "min_view_share" in spec else None
+    accept = start_check(robot, name)
     return [
         {"q": q.tolist(), "start_mm": 1000 * t, "start_deg": math.degrees(r)}
         for q, t, r in experiment.start_poses(

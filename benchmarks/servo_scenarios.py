@@ -184,7 +184,12 @@ def run_robot(args: argparse.Namespace, robot_name: str, noisy: bool, chosen: li
         for name in args.sets:
             for seed in args.seeds:
                 starts = experiment.start_poses(
-                    robot.kinematics, name, args.starts, seed, params.robot.home_q
+                    robot.kinematics,
+                    name,
+                    args.starts,
+                    seed,
+                    params.robot.home_q,
+                    servo_peers.start_check(robot, name),
                 )
                 for scenario_name, label in (
                     (scenario_name, label)

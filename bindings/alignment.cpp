@@ -149,6 +149,10 @@ max_translation : float
     per axis; the grid then holds the scene and the model's start grown by this instead
     of by the model's reach, and farther peaks are ignored (two views of one scene, as in
     servoing). 0 (default): unbounded.
+local_icp : bool
+    Without global search: the point-to-plane ICP of icp_refinement after Algorithm 1,
+    kept unless it lowers fitness by more than 0.05.
+    Off (default): the paper's Algorithm 1 alone.
 )doc");
   define_settings(local)
       .def_readwrite("translation_gain", &LocalParams::translation_gain)
@@ -163,7 +167,8 @@ max_translation : float
       .def_readwrite("tolerance", &LocalParams::tolerance)
       .def_readwrite("max_iterations", &LocalParams::max_iterations)
       .def_readwrite("subvoxel", &LocalParams::subvoxel)
-      .def_readwrite("max_translation", &LocalParams::max_translation);
+      .def_readwrite("max_translation", &LocalParams::max_translation)
+      .def_readwrite("local_icp", &LocalParams::icp);
 
   py::class_<GlobalSearchParams> search(m, "GlobalSearchParams", R"doc(
 The global search (beyond the paper): ``AlignParams.search``, read by the hypothesis

@@ -26,6 +26,8 @@ void define_model_aligner(py::module_& m) {
                     "J_t and J_r of the iteration records.")
       .def_readonly("fitness", &ModelAlignerTimings::fitness,
                     "The verification's fitness and check of the result, and the verdict.")
+      .def_readonly("icp", &ModelAlignerTimings::icp,
+                    "The ICP after Algorithm 1 (AlignParams.local_icp).")
       .def_readonly("total", &ModelAlignerTimings::total, "The whole call.")
       .def("__repr__", [](const ModelAlignerTimings& t) {
         std::ostringstream out;

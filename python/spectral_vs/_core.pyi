@@ -442,6 +442,7 @@ class LocalParams:
         max_iterations: int = ...,
         subvoxel: bool = ...,
         max_translation: float = ...,
+        local_icp: bool = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
@@ -455,6 +456,7 @@ class LocalParams:
     max_iterations: int
     subvoxel: bool
     max_translation: float  # metres, 0: unbounded
+    local_icp: bool
 
 class GlobalSearchParams:
     """The global search (AlignParams.search), with the C++ struct's units."""
@@ -543,6 +545,7 @@ class AlignParams:
         max_iterations: int = ...,
         subvoxel: bool = ...,
         max_translation: float = ...,
+        local_icp: bool = ...,
         search: GlobalSearchParams = ...,
         global_search: bool = ...,
         hypotheses: int = ...,
@@ -611,6 +614,7 @@ class AlignParams:
     max_iterations: int
     subvoxel: bool
     max_translation: float  # metres, 0: unbounded
+    local_icp: bool
     global_search: bool
     hypotheses: int
     refinements: int
@@ -844,6 +848,8 @@ class ModelAlignerTimings:
     def records(self) -> float: ...
     @property
     def fitness(self) -> float: ...
+    @property
+    def icp(self) -> float: ...
     @property
     def total(self) -> float: ...
 

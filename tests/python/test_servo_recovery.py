@@ -109,33 +109,55 @@ def test_the_nearest_parallel_plane_is_the_table_not_the_floor():
         assert chosen == pytest.approx(nearest, abs=0.005), table_share
 
 
-def test_the_recovery_levels_the_camera_onto_the_plane_then_gives_up():
+def test_the_recovery_turns_in_place_first_then_gives_up():
     # The current camera is tilted by 35 degrees about its x axis and 0.2 m nearer the
     # table: no relocalization is taken (relocalize_score and recover_score 1), so from
-    # the first step on (recover_after 1) the servo heads for the levelled pose: the tilt
-    # undone about the camera's origin, at the reference's 0.55 m from the plane plus
-    # recover_standoff.
+    # the first step on (recover_after 1) the servo heads for the turned pose: the tilt
+    # undone about the camera's origin, the camera not moved (its distance to the
+    # reference cannot grow while nothing says where the reference is).
     points, normals = table_scene()
     servo = SpectralServo(PointCloud(points, normals), never_registering(recover_steps=2))
     T_current_reference, current = tilted_view(points, normals)
-    n_current = T_current_reference[:3, :3] @ [0.0, 0.0, -1.0]
-    d_current = 0.55 - n_current @ T_current_reference[:3, 3]  # the camera's distance
-    expected_t = n_current * (0.55 + servo.params.recover_standoff - d_current)
     for step in range(2):
         _, status, record = servo.step_record(current, np.eye(4), now=0.1 * step)
-        assert status.state == "running" and record.recovery == "level"
+        assert status.state == "running" and record.recovery == "turn"
         assert math.isnan(record.fitness)
         R = np.asarray(record.T_current_desired)[:3, :3]
         _, turn_error = pose_error(
             np.block([[R.T @ T_current_reference[:3, :3], np.zeros((3, 1))], [0, 0, 0, 1]])
         )
         assert math.degrees(turn_error) < 0.5
-        t = np.asarray(record.T_current_desired)[:3, 3]
-        assert np.linalg.norm(t - expected_t) < 0.005
+        assert np.allclose(np.asarray(record.T_current_desired)[:3, 3], 0.0)
         assert np.linalg.norm(record.twist) > 0
     _, status, record = servo.step_record(current, np.eye(4), now=0.2)
     assert status.state == "stopped" and status.reason == "lost"
     assert "lost" in REASONS and np.allclose(record.twist, 0.0)
+
+
+@pytest.mark.parametrize(("excursion", "widest"), [(math.inf, 0.25), (0.01, 0.21)])
+def test_each_failed_try_from_its_target_takes_the_recovery_one_stage_further(
+    excursion: float, widest: float
+):
+    # A level camera 0.1 m nearer the table than the reference (so at the turn's target
+    # from the start): every try fails (relocalize_score and recover_score 1, one per step).
+    # The turn in place fails at step 1; the recovery then takes the reference's 0.55 m to
+    # the plane (the camera, 0.1 m off, is within one standoff: at its target); that fails
+    # at step 2, and the target is then one standoff (0.15 m) farther still, cut to the
+    # start's 0.1 m offset plus recover_excursion: 0.11 m.
+    points, normals = table_scene()
+    params = never_registering(
+        recover_retry=1, recover_steps=10, recover_standoff=0.15, recover_excursion=excursion
+    )
+    servo = SpectralServo(PointCloud(points, normals), params)
+    nearer = np.eye(4)
+    nearer[2, 3] = -0.1
+    current = moved(points, normals, nearer)
+    records = [servo.step_record(current, np.eye(4), now=0.1 * k)[2] for k in range(4)]
+    assert [r.recovery for r in records] == ["turn", "level", "level", "level"]
+    backwards = [-float(np.asarray(r.T_current_desired)[2, 3]) for r in records]
+    # The camera never reaches the widest target: no further try counts, the stage stays.
+    assert backwards == pytest.approx([0.0, 0.1, widest, widest], abs=0.002)
+    assert all(math.degrees(r.rotation_error) < 0.5 for r in records)
 
 
 def test_without_a_plane_the_recovery_backs_off_along_the_optical_axis():
@@ -173,7 +195,7 @@ def test_the_recovery_relocalizes_every_recover_retry_steps():
     servo = SpectralServo(PointCloud(points, normals), params)
     _, current = tilted_view(points, normals)
     records = [servo.step_record(current, np.eye(4), now=0.1 * k)[2] for k in range(8)]
-    assert all(r.recovery == "level" for r in records)
+    assert all(r.recovery == "turn" for r in records)  # never at its target: no stage further
     attempts = [r.step for r in records if not math.isnan(r.relocalization_score)]
     assert attempts == [0, 3, 6]
 
@@ -189,6 +211,8 @@ def test_recovery_settings_are_checked():
         ServoParams(recover_steps=0)
     with pytest.raises(ValueError, match="recover_retry must be >= 1"):
         ServoParams(recover_retry=0)
+    with pytest.raises(ValueError, match="recover_excursion must be >= 0 m"):
+        ServoParams(recover_excursion=math.nan)
 
 
 sim = pytest.importorskip("spectral_vs.sim")
@@ -227,7 +251,7 @@ def test_a_start_with_the_scene_out_of_view_converges_only_with_the_recovery():
         log, (t_mm, r_deg) = run(servo_params, max_steps=90)
         assert log.converged, log.status
         assert t_mm < 2.0 and r_deg < 0.5
-        levelled = [r for r in log.records if r.recovery == "level"]
+        levelled = [r for r in log.records if r.recovery in ("turn", "level")]
         assert len(levelled) >= 3 and not any(r.recovery == "back_off" for r in log.records)
         assert sum(r.relocalized for r in log.records) >= 1
         first = log.records.index(levelled[0])

@@ -55,6 +55,10 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
                               source, params.local.max_iterations);
   prepared.timings.algorithm1 = seconds_since(started);
+  if (params.local.icp) {
+    const StageTimer timer(&prepared.timings, &AlignTimings::icp);
+    refine_with_icp(problem, model, scene, result);
+  }
   // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
   const StageTimer timer(&prepared.timings, &AlignTimings::alternatives);
   if (params.verification.verify)

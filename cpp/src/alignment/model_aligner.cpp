@@ -8,6 +8,7 @@
 #include "alignment/align_detail.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/point_sets.hpp"
+#include "alignment/refinement.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/verdict_detail.hpp"
@@ -53,6 +54,7 @@ struct ModelAligner::Impl {
   std::vector<PhaseCorrelation> kept_plans;
   VoxelGrid target, moving;
   ModelAlignerTimings timings;
+  bool dense_model = false;  // sampled densely enough for the ICP's fine stage
   // Held by each align() for the whole call: calls from several threads share the
   // buffers above, so they run one at a time (guarded by ThreadSanitizer in threads_test).
   mutable std::mutex busy;
@@ -160,9 +162,23 @@ struct ModelAligner::Impl {
     timings.translation = loop_timings.translation;
     timings.records = loop_timings.records;
     t = Clock::now();
-    result.fitness =
-        verifier.fitness(move(pose), moving_model->turned_normals(pose), params.scene.voxel_size);
-    result.voxel_size = params.scene.voxel_size;
+    const double voxel_size = params.scene.voxel_size;
+    const auto fitness_of = [&](const Pose& p) {
+      return verifier.fitness(move(p), moving_model->turned_normals(p), voxel_size);
+    };
+    result.fitness = fitness_of(pose);
+    timings.fitness = seconds_since(t);
+    if (params.local.icp) {
+      t = Clock::now();
+      detail::IcpSettings settings;
+      settings.viewpoint = detail::declared_viewpoint(params);
+      detail::refine_with_icp(
+          model, scene, voxel_size, settings, dense_model,
+          [&](const Transform& T) { return fitness_of(pose_of(T)); }, result);
+      timings.icp = seconds_since(t);
+    }
+    t = Clock::now();
+    result.voxel_size = voxel_size;
     if (params.verification.verify) {
       detail::set_verification(result, verifier.verify(model, result.T_scene_model));
       detail::judge(result, model, verifier, detail::typical_size(model.points()),
@@ -170,7 +186,7 @@ struct ModelAligner::Impl {
     } else {
       detail::leave_unjudged(result);
     }
-    timings.fitness = seconds_since(t);
+    timings.fitness += seconds_since(t);
     return result;
   }
 };
@@ -189,6 +205,7 @@ ModelAligner::ModelAligner(const PointCloud& model, const AlignParams& params)
   if (params.scene.scene_view == SceneView::automatic && !detail::declared_viewpoint(params))
     im.params.scene.scene_view = SceneView::all_sides;
   im.moving_model.emplace(model);
+  im.dense_model = detail::dense_for_polish(model.points(), im.params.scene.voxel_size);
   im.model_coefficients = egi_coefficients(model, params.scene.bandwidth, params.scene.egi_method);
   if (im.local()) {
     im.max_shift = Eigen::Vector3i::Constant(detail::voxels_along(
@@ -212,6 +229,7 @@ AlignTimings local_timings(const ModelAlignerTimings& t) {
   AlignTimings timings;
   timings.preparation = t.scene_coefficients + t.scene_map + t.translation_grid;
   timings.algorithm1 = t.rotation + t.translation + t.records;
+  timings.icp = t.icp;
   timings.verdict = t.fitness;
   timings.total = t.total;
   return timings;

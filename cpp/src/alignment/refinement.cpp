@@ -234,21 +234,30 @@ void polish_result_rotation(const Problem& problem, std::optional<TranslationWin
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result) {
-  detail::IcpSettings settings;
+  IcpSettings settings;
   settings.viewpoint = problem.viewpoint;
+  const double voxel_size = problem.params.scene.voxel_size;
   // The fine stage only for a densely sampled model (kIcpFineDistance).
-  const detail::IcpOutcome icp =
-      detail::refine_in_two_stages(model, scene, result.T_scene_model,
-                                   problem.params.scene.voxel_size, settings, problem.dense_model);
-  const Transform& T_scene_model = icp.T_scene_model;
-  const int iterations = icp.iterations;
-  if (iterations == 0) return;
-  const double fitness = problem.model.fitness(
-      problem.verifier, problem.model.pose_of(T_scene_model), problem.params.scene.voxel_size);
+  refine_with_icp(
+      model, scene, voxel_size, settings, problem.dense_model,
+      [&](const Transform& T) {
+        return problem.model.fitness(problem.verifier, problem.model.pose_of(T), voxel_size);
+      },
+      result);
+}
+
+void refine_with_icp(const PointCloud& model, const PointCloud& scene, double voxel_size,
+                     const IcpSettings& settings, bool fine,
+                     const std::function<double(const Transform&)>& fitness_of,
+                     AlignResult& result) {
+  const IcpOutcome icp =
+      refine_in_two_stages(model, scene, result.T_scene_model, voxel_size, settings, fine);
+  if (icp.iterations == 0) return;
+  const double fitness = fitness_of(icp.T_scene_model);
   if (fitness < result.fitness - kIcpFitnessLoss) return;
-  result.T_scene_model = T_scene_model;
+  result.T_scene_model = icp.T_scene_model;
   result.fitness = fitness;
-  result.icp_iterations = iterations;
+  result.icp_iterations = icp.iterations;
 }
 
 bool better(const AlignResult& a, const AlignResult& b) {

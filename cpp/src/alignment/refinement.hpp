@@ -7,8 +7,10 @@
 #include <spectral_vs/rotation/so3_correlation.hpp>
 
 #include "alignment/algorithm1.hpp"
+#include "alignment/icp_refinement.hpp"
 #include "alignment/stages.hpp"
 
+#include <functional>
 #include <optional>
 
 namespace spectral_vs::detail {
@@ -75,6 +77,14 @@ void polish_result_rotation(const Problem& problem, std::optional<TranslationWin
 /// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole
 /// scene; kept unless it loses fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
+                     AlignResult& result);
+
+/// The two-stage point-to-plane ICP of `result`'s pose (`fine`: the second, tighter stage
+/// too), kept unless its fitness (`fitness_of` a pose) is more than a slide off the object
+/// below the result's: the one rule of both modes' ICP.
+void refine_with_icp(const PointCloud& model, const PointCloud& scene, double voxel_size,
+                     const IcpSettings& settings, bool fine,
+                     const std::function<double(const Transform&)>& fitness_of,
                      AlignResult& result);
 
 /// `a` is a better result than `b`: fitter, or as fit and better correlated.

@@ -96,6 +96,7 @@ class SpectralServo(SensorFaults, Relocalization):
         if self.params.uses_tracking():
             tracking = copy.copy(self._align_params)
             tracking.max_translation = self.params.registration.tracking_translation
+            tracking.local_icp = self.params.registration.tracking_icp
             self._tracking_aligner = ModelAligner(self.reference, tracking)
         self._centroid = np.asarray(self.reference.centroid())
         self._plane_turn: _PlaneTurn | None = (
@@ -377,9 +378,14 @@ class SpectralServo(SensorFaults, Relocalization):
         )
         T = np.asarray(result.T_scene_model)
         # The plane turn is of the estimate the step keeps, and of the confidence's pose
-        # under its threshold: a carried step with a confident fit uses neither.
-        if not record.carried or record.visible_fitness < p.relocalization.relocalize_fitness:
+        # under its threshold: a carried step with a confident fit uses neither. An ICP
+        # that was kept (tracking_icp) already fixed the turn about the plane's normal,
+        # past the EGIs, whose off-plane normals a tool on the table biases (2.8 degrees).
+        poor = record.visible_fitness < p.relocalization.relocalize_fitness
+        if (not record.carried or poor) and result.icp_iterations == 0:
             T = self._turned(cloud, scene, T)
+        else:
+            self._last_turn = 0.0
         # fitness / share >= fitness: the share is needed only under the threshold.
         record.score = (
             record.visible_fitness

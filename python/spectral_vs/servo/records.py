@@ -172,8 +172,9 @@ class ServoRecord:
         little for Algorithm 1's step.
     recovery : str
         ``""``, or how the step moved the camera to widen its overlap with the reference
-        (``ServoParams.recover_after``): ``"level"`` (onto the reference's plane, at its
-        distance plus ``recover_standoff``) or ``"back_off"`` (along the optical axis).
+        (``ServoParams.recover_after``): ``"turn"`` (in place, onto the reference's plane),
+        ``"level"`` (onto it, at the reference's distance to it plus the stage's standoff)
+        or ``"back_off"`` (along the optical axis).
         ``T_current_desired`` and the errors are then those of the recovery's target pose,
         no registration ran (``fitness`` and ``confidence`` NaN), and the step never
         converges.

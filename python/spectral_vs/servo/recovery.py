@@ -1,7 +1,8 @@
 """The recovery, a part of the servo that owns its state: before the run's first estimate,
 when global registrations keep failing, it moves the camera to widen the view's overlap
-with the reference (level onto the reference's plane at a standoff, else back off along the
-optical axis), and it drops what stands in front of the scene (``ServoParams.recovery``;
+with the reference, in stages (turn in place onto the reference's plane, then also take
+the reference's distance to it, then standoffs farther; else back off along the optical
+axis), and it drops what stands in front of the scene (``ServoParams.recovery``;
 docs/servoing.md, "Recovery from a view the registration cannot register")."""
 
 from __future__ import annotations
@@ -18,10 +19,16 @@ from spectral_vs.servo.plane_turn import _turn_between, dominant_plane
 from spectral_vs.servo.records import ServoRecord, ServoStatus
 from spectral_vs.servo.settings import ServoParams
 
-#: The recovery widens its standoff up to this many times recover_standoff, and only once
-#: the camera is within one recover_standoff and this angle of its target (rad): a view
-#: far on the way there says nothing of the target's.
+#: The recovery widens its standoff up to this many times recover_standoff, and takes its
+#: next stage only once the camera is within one recover_standoff and this angle of its
+#: target (rad): a view far on the way there says nothing of the target's.
 _MAX_STANDOFFS = 3
+#: The stages of the levelling recovery, in order: turned in place (no translation: the
+#: camera's distance to the reference cannot grow), at the reference's distance to the
+#: plane (only the error along the plane's normal is undone), then 1 to _MAX_STANDOFFS
+#: recover_standoff farther (a wider view, bought with distance).
+_TURN, _LEVEL = 0, 1
+_LAST_STAGE = _LEVEL + _MAX_STANDOFFS
 _ARRIVED_ROTATION = math.radians(10.0)
 #: An occluder over this share of the points spoils a view for the widening: a hand or a box
 #: in front of the camera is 25-40% of them, the Panda's own fingers in an extreme start's
@@ -81,6 +88,9 @@ class Recovery:
         self._steps = 0
         #: The scene's plane (normal, distance) in the frame first seen, and T_first_that.
         self._scene_plane: tuple[np.ndarray, float, np.ndarray] | None = None
+        #: How far the camera stood from the reference's distance to the plane when the
+        #: plane was first seen (the start: before an estimate the servo holds), m.
+        self._start_offset: float | None = None
         self._T_motion_backoff: np.ndarray | None = None  # the motion at the back-off start
 
     def due(self, anchored: bool) -> bool:
@@ -127,14 +137,14 @@ class Recovery:
             )
             return None
         T = self._level_target(cloud, odometry)
-        record.recovery = "level"
+        record.recovery = "turn" if self._stage() == _TURN else "level"
         if T is None:
             # No plane to level onto: back off along the optical axis from where the
             # recovery started, that pose carried along the camera's measured motion since.
             if self._T_motion_backoff is None:
                 self._T_motion_backoff = motion.copy()
             T = np.eye(4)
-            T[2, 3] = -self._standoff()
+            T[2, 3] = -self._back_off()
             T = _rigid_inverse(motion) @ self._T_motion_backoff @ T
             record.recovery = "back_off"
         record.T_current_desired = T
@@ -200,9 +210,11 @@ class Recovery:
         )
 
     def _level_target(self, cloud: PointCloud, odometry: np.ndarray) -> np.ndarray | None:
-        """``T_current_target`` of the levelling recovery: the camera turned about its origin
-        so that the reference's plane normal comes where the current view sees its plane's,
-        at the reference's distance to the plane plus ``recover_standoff``; None when the
+        """``T_current_target`` of the levelling recovery at its stage: the camera turned
+        about its origin so that the reference's plane normal comes where the current view
+        sees its plane's; from the second stage on also moved along that normal to the
+        reference's distance to the plane plus the stage's standoff, never more than
+        ``recover_excursion`` beyond the start's offset from it. None when the
         reference or the current view has no dominant plane."""
         if self._reference_plane is None:
             return None
@@ -213,15 +225,33 @@ class Recovery:
         n_current, d_current = current
         T = np.eye(4)
         T[:3, :3] = _turn_between(n_reference, n_current)
-        # The target origin t lies at n.t + d_current from the plane.
-        T[:3, 3] = n_current * (d_reference + self._standoff() - d_current)
+        if self._start_offset is None:
+            self._start_offset = abs(d_current - d_reference)
+        stage = self._stage()
+        if stage > _TURN:
+            p = self.params.recovery
+            standoff = min(
+                p.recover_standoff * (stage - _LEVEL), self._start_offset + p.recover_excursion
+            )
+            # The target origin t lies at n.t + d_current from the plane.
+            T[:3, 3] = n_current * (d_reference + standoff - d_current)
         return T
 
-    def _standoff(self) -> float:
-        """How much farther from the scene than the reference the recovery takes the camera,
+    def _stage(self) -> int:
+        """The levelling recovery's stage: one further for every ``recover_widen`` global
+        registrations of the recovery that were not reliable from its target with no
+        occluder in view, up to :data:`_LAST_STAGE`; ``recover_widen`` 0: the reference's
+        distance plus one standoff from the start."""
+        widen = self.params.recovery.recover_widen
+        if widen == 0:
+            return _LEVEL + 1
+        return min(self._widening_tries // widen, _LAST_STAGE)
+
+    def _back_off(self) -> float:
+        """How far back along the optical axis the recovery without a plane takes the camera,
         m: ``recover_standoff``, once more for every ``recover_widen`` global registrations
-        of the recovery that were not reliable from its target with no occluder in view, up
-        to :data:`_MAX_STANDOFFS` times it (a farther view sees more of the scene)."""
+        that were not reliable from its target with no occluder in view, up to
+        :data:`_MAX_STANDOFFS` times it."""
         p = self.params.recovery
         if p.recover_widen == 0:
             return p.recover_standoff

@@ -134,6 +134,15 @@ class RegistrationParams:
         ``max_translation`` (the answer may lie beyond the bound: a jump that the watchdog
         must see); before, the estimate is the carried one. ``inf``, or not below
         ``max_translation``: always ``max_translation``.
+    tracking_icp : bool
+        On those bounded steps, the point-to-plane ICP after Algorithm 1
+        (``AlignParams.local_icp``: pairs within a voxel, then 0.4 of one; kept unless it
+        lowers the fitness by more than 0.05). Algorithm 1's estimate from a view with
+        geometry the reference lacks is pulled by it: a tool left on the table took a
+        Panda start to a convergence 11 mm and 8.3 degrees off with a fitness of 0.975,
+        and the ICP from that estimate, whose pairs leave the tool out, ends 0.1-0.3 mm
+        and 0.04 degree from the truth (docs/servoing.md, "What the servo does when it
+        cannot see").
     max_depth : float
         Points farther than this along the optical axis are ignored (both clouds), m; 0
         (default): the reference's farthest point plus 1.7 extents of it (1.5 m on the
@@ -155,6 +164,7 @@ class RegistrationParams:
     warm_start: bool = False
     max_translation: float = 0.0
     tracking_translation: float = 0.0
+    tracking_icp: bool = True
     max_depth: float = 0.0
     align_overrides: dict[str, Any] = field(default_factory=dict)
 
@@ -467,11 +477,12 @@ class RecoveryParams:
         view that shares little with the reference, drifts farther off) and moves the
         camera to widen the overlap, relocalizing on at ``recover_retry``. When both the
         reference and the current view have a dominant plane (``min_plane_share``, within
-        ``plane_cone``; a table top), it levels the camera onto it: the rotation that takes
-        the reference's plane normal to where the current view sees its own, about the
-        camera's origin, and the distance to the plane of the reference plus
-        ``recover_standoff``. Otherwise it backs off along its optical axis by
-        ``recover_standoff`` from where the recovery started. 0: no recovery.
+        ``plane_cone``; a table top), it levels the camera onto it, in stages
+        (``recover_widen``): turned in place (the rotation that takes the reference's
+        plane normal to where the current view sees its own, about the camera's origin),
+        then also at the reference's distance to the plane, then ``recover_standoff``
+        farther, within ``recover_excursion``. Otherwise it backs off along its optical
+        axis by ``recover_standoff`` from where the recovery started. 0: no recovery.
     recover_standoff : float
         How much farther from the scene than the reference the recovery takes the camera,
         m (> 0): a farther view sees more of the scene. 0 (default): 0.27 extents of the
@@ -489,16 +500,28 @@ class RecoveryParams:
         without one costs about 2 ms, with one 40-90 ms (320 x 240): the spacing sets how
         much of a recovering run is global registration.
     recover_widen : int
-        Every this many global registrations of the recovery that are not reliable add
-        another ``recover_standoff`` to the standoff, up to 3 times it (>= 0; 0: a fixed
-        standoff). Counted only once the camera is within one standoff of the recovery's
-        target (a view far on the way there says nothing of the target's) and when no
-        occluder fills a tenth of the view. Since the servo takes only a reliable
+        Every this many global registrations of the recovery that are not reliable take it
+        one stage further: turned in place, then at the reference's distance to the plane,
+        then 1, 2 and 3 ``recover_standoff`` farther (>= 0; 0: the reference's distance
+        plus one standoff from the start, no stages; the back-off widens by a standoff a
+        stage). Counted only once the camera is within one standoff and 10 degrees of the
+        recovery's target (a view far on the way there says nothing of the target's) and
+        when no occluder fills a tenth of the view. Since the servo takes only a reliable
         relocalization, a recovery that levels the camera where the view still registers
         only doubtfully must widen it: on the extreme starts of seed 0, 5 of 40 runs
         stopped ``"lost"`` at a fixed 0.15 m and converged at 0.3 m (docs/servoing.md,
         "What the servo does when it cannot see"); widening at every try on the way, a
         moderate start under an 8 cm box went 83 mm beyond its start.
+    recover_excursion : float
+        How much farther from the reference's distance to the plane than at its start the
+        levelling recovery may take the camera, m (>= 0; inf, the default: no bound): the
+        standoff is cut to the start's offset from that distance plus this. A move along
+        the plane's normal bounded so adds at most this much to the camera's distance from
+        the reference pose, whatever its offset along the plane, which the recovery cannot
+        know. For a user who would rather stop (``"lost"``) than see the camera move away
+        to widen its view: on the tuning starts (seeds 0-1, clean), 0.01 m took every
+        excursion away and cost 4 of 80 large starts and 4 of 40 of the iiwa's extreme
+        ones (docs/servoing.md, "Recovery from a view the registration cannot register").
     """
 
     recover_after: int = 1
@@ -507,6 +530,7 @@ class RecoveryParams:
     recover_steps: int = 60
     recover_retry: int = 8
     recover_widen: int = 1
+    recover_excursion: float = math.inf
 
     def __post_init__(self) -> None:
         _check_share(self, ("recover_score",))
@@ -519,6 +543,10 @@ class RecoveryParams:
         _check_at_least(self, "recover_steps", 1, "step")
         _check_at_least(self, "recover_retry", 1, "step")
         _check_at_least(self, "recover_widen", 0)
+        if not _check_number(self, "recover_excursion") >= 0:
+            raise ValueError(
+                f"recover_excursion must be >= 0 m (inf: no bound), got {self.recover_excursion}"
+            )
 
 
 @dataclass

@@ -21,6 +21,7 @@ struct ModelAlignerTimings {
   double records = 0.0;             ///< J_t and J_r of the iteration records.
   double fitness = 0.0;             ///< The verification's fitness of the result (its screen
                                     ///< around the model) and check (params.verification).
+  double icp = 0.0;                 ///< The ICP after Algorithm 1 (LocalParams::icp).
   double total = 0.0;               ///< The whole call.
 };
 
