@@ -254,6 +254,12 @@ def percentile(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
+def falsely_converged(record: dict) -> bool:
+    """A run that ended ``converged`` farther than the success tolerances from the goal: a
+    wrong answer that looked right."""
+    return record["reason"] == "converged" and not record["success"]
+
+
 def table() -> str:
     """The table of every run file: per robot, set, scenario and controller."""
     cells: dict[tuple, list[dict]] = {}
@@ -280,6 +286,7 @@ def table() -> str:
                 key[3],
                 f"{len(good)}/{len(records)}",
                 f"{sum(not r['wandered'] for r in records)}/{len(records)}",
+                str(sum(falsely_converged(r) for r in records)),
                 report_lib.num(percentile([r["final_mm"] for r in good], 50), digits=2)
                 + " mm, "
                 + report_lib.num(percentile([r["final_deg"] for r in good], 50), digits=3)
@@ -300,6 +307,7 @@ def table() -> str:
         "controller",
         "success",
         "no excursion",
+        "converged off the goal",
         "final error (median, successes)",
         "worst excursion",
         "step CPU ms, median / p95",

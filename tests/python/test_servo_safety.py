@@ -6,6 +6,8 @@ those of test_servo.py; the faults in the simulation are in test_sensor_faults.p
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import test_servo
@@ -305,3 +307,19 @@ def test_a_view_emptied_by_what_stands_above_the_scene_holds_and_never_raises(sc
         assert record.hold == "occluded" and not twist.any()
         assert "0 points remain" in status.message
     assert status.state == "stopped" and status.reason == "sensor_outage"
+
+
+@pytest.mark.parametrize(("icp", "converges"), [(False, False), (True, True)])
+def test_an_occluded_estimate_converges_only_when_the_icp_refined_it(icp, converges):
+    """The stop rule: an estimate at the goal (0.3 mm, 0.02 degree) with an occluder hiding
+    30% of the reference converges only when it ends with the tracking ICP, whose pairs lie
+    where both views see the scene; Algorithm 1's alone is biased by the hole."""
+    from spectral_vs.servo.records import _empty_record
+    from spectral_vs.servo.stop import StopRule
+
+    record = _empty_record(0, 50_000)
+    record.translation_error, record.rotation_error = 0.0003, math.radians(0.02)
+    record.visible_fitness, record.hidden_share, record.icp = 1.0, 0.3, icp
+    assert StopRule(ServoParams()).settled(record) is converges
+    record.hidden_share = 0.0
+    assert StopRule(ServoParams()).settled(record)  # a clear view converges either way

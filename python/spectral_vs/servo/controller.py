@@ -382,7 +382,8 @@ class SpectralServo(SensorFaults, Relocalization):
         # that was kept (tracking_icp) already fixed the turn about the plane's normal,
         # past the EGIs, whose off-plane normals a tool on the table biases (2.8 degrees).
         poor = record.visible_fitness < p.relocalization.relocalize_fitness
-        if (not record.carried or poor) and result.icp_iterations == 0:
+        record.icp = not record.carried and result.icp_iterations > 0
+        if (not record.carried or poor) and not record.icp:
             T = self._turned(cloud, scene, T)
         else:
             self._last_turn = 0.0

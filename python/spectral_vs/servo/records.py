@@ -126,6 +126,10 @@ class ServoRecord:
         The estimate is the registration that sought only
         ``ServoParams.tracking_translation`` (False also when it was redone with
         ``max_translation`` for a poor fitness).
+    icp : bool
+        The estimate ends with the tracking registration's point-to-plane ICP
+        (``ServoParams.tracking_icp``), kept: Algorithm 1's step refined by pairs within a
+        voxel, which leave out what the reference lacks and what an occluder hides.
     hold : str
         Why the step held the robot still (zero twist), one of :data:`HOLDS`; ``""`` when
         it did not. A held step never converges and changes neither the watchdog's nor the
@@ -205,6 +209,7 @@ class ServoRecord:
     velocity_scale: float = 1.0
     plane_turn: float = 0.0
     tracking: bool = False
+    icp: bool = False
     hold: str = ""
     outage: float = 0.0
     occluded_points: int = 0
