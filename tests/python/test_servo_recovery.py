@@ -109,14 +109,23 @@ def test_the_nearest_parallel_plane_is_the_table_not_the_floor():
         assert chosen == pytest.approx(nearest, abs=0.005), table_share
 
 
-def test_the_recovery_turns_in_place_first_then_gives_up():
+def test_a_view_that_nearly_registered_is_turned_in_place_then_given_up():
     # The current camera is tilted by 35 degrees about its x axis and 0.2 m nearer the
-    # table: no relocalization is taken (relocalize_score and recover_score 1), so from
-    # the first step on (recover_after 1) the servo heads for the turned pose: the tilt
-    # undone about the camera's origin, the camera not moved (its distance to the
-    # reference cannot grow while nothing says where the reference is).
+    # table. The first relocalization is not taken (relocalize_score 1) but has the support
+    # a recovery takes (recover_score 0), so from the first step on (recover_after 1) the
+    # servo heads for the turned pose: the tilt undone about the camera's origin, the
+    # camera not moved (its distance to the reference cannot grow while nothing says where
+    # the reference is). No try comes after the first (recover_retry 100).
     points, normals = table_scene()
-    servo = SpectralServo(PointCloud(points, normals), never_registering(recover_steps=2))
+    params = ServoParams(
+        relocalize_score=1.0,
+        recover_score=0.0,
+        relocalize_retry=1,
+        recover_after=1,
+        recover_retry=100,
+        recover_steps=2,
+    )
+    servo = SpectralServo(PointCloud(points, normals), params)
     T_current_reference, current = tilted_view(points, normals)
     for step in range(2):
         _, status, record = servo.step_record(current, np.eye(4), now=0.1 * step)
@@ -134,29 +143,29 @@ def test_the_recovery_turns_in_place_first_then_gives_up():
     assert "lost" in REASONS and np.allclose(record.twist, 0.0)
 
 
-@pytest.mark.parametrize(("excursion", "widest"), [(math.inf, 0.25), (0.01, 0.21)])
-def test_each_failed_try_from_its_target_takes_the_recovery_one_stage_further(
-    excursion: float, widest: float
-):
-    # A level camera 0.1 m nearer the table than the reference (so at the turn's target
-    # from the start): every try fails (relocalize_score and recover_score 1, one per step).
-    # The turn in place fails at step 1; the recovery then takes the reference's 0.55 m to
-    # the plane (the camera, 0.1 m off, is within one standoff: at its target); that fails
-    # at step 2, and the target is then one standoff (0.15 m) farther still, cut to the
-    # start's 0.1 m offset plus recover_excursion: 0.11 m.
+@pytest.mark.parametrize(
+    ("excursion", "backwards"), [(math.inf, [0.05, 0.2, 0.2, 0.2]), (0.01, [0.01] * 4)]
+)
+def test_each_failed_try_from_its_target_widens_the_standoff(excursion, backwards):
+    # A level camera 0.1 m farther from the table than the reference; every try fails
+    # (relocalize_score and recover_score 1, one per step), the first with less support
+    # than a recovery takes: no turn in place. The first target is the reference's 0.55 m
+    # to the plane plus one standoff (0.15 m): 0.05 m back, within one standoff (at its
+    # target); that fails at step 1 and the target is two standoffs (0.2 m back), never
+    # reached, so no further try counts. recover_excursion 0.01 m cuts the standoff to the
+    # start's 0.1 m offset plus 0.01 m: 0.01 m back, whatever the stage.
     points, normals = table_scene()
     params = never_registering(
         recover_retry=1, recover_steps=10, recover_standoff=0.15, recover_excursion=excursion
     )
     servo = SpectralServo(PointCloud(points, normals), params)
-    nearer = np.eye(4)
-    nearer[2, 3] = -0.1
-    current = moved(points, normals, nearer)
+    farther = np.eye(4)
+    farther[2, 3] = 0.1
+    current = moved(points, normals, farther)
     records = [servo.step_record(current, np.eye(4), now=0.1 * k)[2] for k in range(4)]
-    assert [r.recovery for r in records] == ["turn", "level", "level", "level"]
-    backwards = [-float(np.asarray(r.T_current_desired)[2, 3]) for r in records]
-    # The camera never reaches the widest target: no further try counts, the stage stays.
-    assert backwards == pytest.approx([0.0, 0.1, widest, widest], abs=0.002)
+    assert [r.recovery for r in records] == ["level"] * 4
+    moved_back = [-float(np.asarray(r.T_current_desired)[2, 3]) for r in records]
+    assert moved_back == pytest.approx(backwards, abs=0.002)
     assert all(math.degrees(r.rotation_error) < 0.5 for r in records)
 
 
@@ -195,7 +204,7 @@ def test_the_recovery_relocalizes_every_recover_retry_steps():
     servo = SpectralServo(PointCloud(points, normals), params)
     _, current = tilted_view(points, normals)
     records = [servo.step_record(current, np.eye(4), now=0.1 * k)[2] for k in range(8)]
-    assert all(r.recovery == "turn" for r in records)  # never at its target: no stage further
+    assert all(r.recovery == "level" for r in records)
     attempts = [r.step for r in records if not math.isnan(r.relocalization_score)]
     assert attempts == [0, 3, 6]
 

@@ -1,9 +1,10 @@
 """The recovery, a part of the servo that owns its state: before the run's first estimate,
 when global registrations keep failing, it moves the camera to widen the view's overlap
-with the reference, in stages (turn in place onto the reference's plane, then also take
-the reference's distance to it, then standoffs farther; else back off along the optical
-axis), and it drops what stands in front of the scene (``ServoParams.recovery``;
-docs/servoing.md, "Recovery from a view the registration cannot register")."""
+with the reference, in stages (a view that nearly registered turned in place onto the
+reference's plane first; then levelled onto it at one, two, three standoffs; else backed
+off along the optical axis), and it drops what stands in front of the scene
+(``ServoParams.recovery``; docs/servoing.md, "Recovery from a view the registration cannot
+register")."""
 
 from __future__ import annotations
 
@@ -24,11 +25,12 @@ from spectral_vs.servo.settings import ServoParams
 #: target (rad): a view far on the way there says nothing of the target's.
 _MAX_STANDOFFS = 3
 #: The stages of the levelling recovery, in order: turned in place (no translation: the
-#: camera's distance to the reference cannot grow), at the reference's distance to the
-#: plane (only the error along the plane's normal is undone), then 1 to _MAX_STANDOFFS
-#: recover_standoff farther (a wider view, bought with distance).
-_TURN, _LEVEL = 0, 1
-_LAST_STAGE = _LEVEL + _MAX_STANDOFFS
+#: camera's distance to the reference cannot grow), taken only when the first failed global
+#: registration had the support of recover_score (the view nearly registered); then at
+#: the reference's distance to the plane plus 1 to _MAX_STANDOFFS recover_standoff (a
+#: wider view, bought with distance). A stage's number is its standoffs.
+_TURN = 0
+_LAST_STAGE = _MAX_STANDOFFS
 _ARRIVED_ROTATION = math.radians(10.0)
 #: An occluder over this share of the points spoils a view for the widening: a hand or a box
 #: in front of the camera is 25-40% of them, the Panda's own fingers in an extreme start's
@@ -83,6 +85,7 @@ class Recovery:
         """Forget the recovery: the failed relocalizations in a row, its steps so far and
         where it started backing off from."""
         self._failed = 0
+        self._first_stage = 1  # _TURN when the first failed try nearly registered
         self._widening_tries = 0  # of them, from the recovery's target, no occluder in view
         self._arrived = False  # the camera is at the recovery's target
         self._steps = 0
@@ -110,6 +113,11 @@ class Recovery:
 
     def failed(self, recovering: bool, record: ServoRecord) -> None:
         """A global registration was not taken (``recovering``: during the recovery)."""
+        if self._failed == 0:
+            # A view whose registration had the support a recovery takes, but not the
+            # verdict, is near: turning it in place moves the camera no farther away.
+            nearly = record.relocalization_score >= self.params.recovery.recover_score
+            self._first_stage = _TURN if nearly else 1
         self._failed += 1
         # Only a view from the recovery's target, and one no occluder spoils, says that
         # the standoff is too small.
@@ -212,8 +220,8 @@ class Recovery:
     def _level_target(self, cloud: PointCloud, odometry: np.ndarray) -> np.ndarray | None:
         """``T_current_target`` of the levelling recovery at its stage: the camera turned
         about its origin so that the reference's plane normal comes where the current view
-        sees its plane's; from the second stage on also moved along that normal to the
-        reference's distance to the plane plus the stage's standoff, never more than
+        sees its plane's; after the turn in place also moved along that normal to the
+        reference's distance to the plane plus the stage's standoffs, never more than
         ``recover_excursion`` beyond the start's offset from it. None when the
         reference or the current view has no dominant plane."""
         if self._reference_plane is None:
@@ -230,22 +238,20 @@ class Recovery:
         stage = self._stage()
         if stage > _TURN:
             p = self.params.recovery
-            standoff = min(
-                p.recover_standoff * (stage - _LEVEL), self._start_offset + p.recover_excursion
-            )
+            standoff = min(p.recover_standoff * stage, self._start_offset + p.recover_excursion)
             # The target origin t lies at n.t + d_current from the plane.
             T[:3, 3] = n_current * (d_reference + standoff - d_current)
         return T
 
     def _stage(self) -> int:
-        """The levelling recovery's stage: one further for every ``recover_widen`` global
-        registrations of the recovery that were not reliable from its target with no
-        occluder in view, up to :data:`_LAST_STAGE`; ``recover_widen`` 0: the reference's
-        distance plus one standoff from the start."""
+        """The levelling recovery's stage (its standoffs; :data:`_TURN` in place): from the
+        first, one further for every ``recover_widen`` global registrations of the
+        recovery that were not reliable from its target with no occluder in view, up to
+        :data:`_LAST_STAGE`; ``recover_widen`` 0: one standoff throughout."""
         widen = self.params.recovery.recover_widen
         if widen == 0:
-            return _LEVEL + 1
-        return min(self._widening_tries // widen, _LAST_STAGE)
+            return 1
+        return min(self._first_stage + self._widening_tries // widen, _LAST_STAGE)
 
     def _back_off(self) -> float:
         """How far back along the optical axis the recovery without a plane takes the camera,

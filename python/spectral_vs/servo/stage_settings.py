@@ -478,11 +478,13 @@ class RecoveryParams:
         camera to widen the overlap, relocalizing on at ``recover_retry``. When both the
         reference and the current view have a dominant plane (``min_plane_share``, within
         ``plane_cone``; a table top), it levels the camera onto it, in stages
-        (``recover_widen``): turned in place (the rotation that takes the reference's
-        plane normal to where the current view sees its own, about the camera's origin),
-        then also at the reference's distance to the plane, then ``recover_standoff``
-        farther, within ``recover_excursion``. Otherwise it backs off along its optical
-        axis by ``recover_standoff`` from where the recovery started. 0: no recovery.
+        (``recover_widen``): when the first failed global registration had the support of
+        ``recover_score`` (the view nearly registered), first turned in place (the
+        rotation that takes the reference's plane normal to where the current view sees
+        its own, about the camera's origin); then also at the reference's distance to the
+        plane plus ``recover_standoff``, within ``recover_excursion``. Otherwise it backs
+        off along its optical axis by ``recover_standoff`` from where the recovery
+        started. 0: no recovery.
     recover_standoff : float
         How much farther from the scene than the reference the recovery takes the camera,
         m (> 0): a farther view sees more of the scene. 0 (default): 0.27 extents of the
@@ -501,12 +503,12 @@ class RecoveryParams:
         much of a recovering run is global registration.
     recover_widen : int
         Every this many global registrations of the recovery that are not reliable take it
-        one stage further: turned in place, then at the reference's distance to the plane,
-        then 1, 2 and 3 ``recover_standoff`` farther (>= 0; 0: the reference's distance
-        plus one standoff from the start, no stages; the back-off widens by a standoff a
-        stage). Counted only once the camera is within one standoff and 10 degrees of the
-        recovery's target (a view far on the way there says nothing of the target's) and
-        when no occluder fills a tenth of the view. Since the servo takes only a reliable
+        one stage further: from the turn in place (if taken) to the reference's distance to
+        the plane plus one ``recover_standoff``, then two, then three (>= 0; 0: one
+        standoff throughout, no turn; the back-off widens the same way). Counted only
+        once the camera is within one standoff and 10 degrees of the recovery's target (a
+        view far on the way there says nothing of the target's) and when no occluder fills
+        a tenth of the view. Since the servo takes only a reliable
         relocalization, a recovery that levels the camera where the view still registers
         only doubtfully must widen it: on the extreme starts of seed 0, 5 of 40 runs
         stopped ``"lost"`` at a fixed 0.15 m and converged at 0.3 m (docs/servoing.md,
