@@ -61,10 +61,10 @@ def moved(points: np.ndarray, normals: np.ndarray, T: np.ndarray) -> PointCloud:
 
 def never_registering(**overrides) -> ServoParams:
     """Settings under which no global registration is ever taken (``relocalize_score`` and
-    ``recover_score`` 1) and the recovery starts after the first (``recover_after`` 1)."""
-    return ServoParams(
-        relocalize_score=1.0, recover_score=1.0, relocalize_retry=1, recover_after=1, **overrides
-    )
+    ``recover_score`` 1) and the recovery starts after the first (``recover_after`` 1),
+    with ``overrides`` on top."""
+    settings = {"relocalize_score": 1.0, "recover_score": 1.0, "relocalize_retry": 1}
+    return ServoParams(**{**settings, "recover_after": 1, **overrides})
 
 
 def tilted_view(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, PointCloud]:
@@ -117,14 +117,7 @@ def test_a_view_that_nearly_registered_is_turned_in_place_then_given_up():
     # camera not moved (its distance to the reference cannot grow while nothing says where
     # the reference is). No try comes after the first (recover_retry 100).
     points, normals = table_scene()
-    params = ServoParams(
-        relocalize_score=1.0,
-        recover_score=0.0,
-        relocalize_retry=1,
-        recover_after=1,
-        recover_retry=100,
-        recover_steps=2,
-    )
+    params = never_registering(recover_score=0.0, recover_retry=100, recover_steps=2)
     servo = SpectralServo(PointCloud(points, normals), params)
     T_current_reference, current = tilted_view(points, normals)
     for step in range(2):
@@ -174,13 +167,7 @@ def test_without_a_plane_the_recovery_backs_off_along_the_optical_axis():
     # pose 0.15 m back along the optical axis, carried along the camera's motion.
     points, normals = table_scene()
     sides = np.abs(normals[:, 2]) < 0.5
-    params = ServoParams(
-        relocalize_score=1.0,
-        recover_score=1.0,
-        relocalize_retry=1,
-        recover_after=1,
-        recover_standoff=0.15,
-    )
+    params = never_registering(recover_standoff=0.15)
     servo = SpectralServo(PointCloud(points[sides], normals[sides]), params)
     current = PointCloud(points[sides], normals[sides])
     _, _, first = servo.step_record(current, np.eye(4), now=0.0)

@@ -30,7 +30,6 @@ _MAX_STANDOFFS = 3
 #: the reference's distance to the plane plus 1 to _MAX_STANDOFFS recover_standoff (a
 #: wider view, bought with distance). A stage's number is its standoffs.
 _TURN = 0
-_LAST_STAGE = _MAX_STANDOFFS
 _ARRIVED_ROTATION = math.radians(10.0)
 #: An occluder over this share of the points spoils a view for the widening: a hand or a box
 #: in front of the camera is 25-40% of them, the Panda's own fingers in an extreme start's
@@ -152,7 +151,8 @@ class Recovery:
             if self._T_motion_backoff is None:
                 self._T_motion_backoff = motion.copy()
             T = np.eye(4)
-            T[2, 3] = -self._back_off()
+            # The back-off has no turn: it starts at one standoff.
+            T[2, 3] = -self.params.recovery.recover_standoff * self._stage_from(1)
             T = _rigid_inverse(motion) @ self._T_motion_backoff @ T
             record.recovery = "back_off"
         record.T_current_desired = T
@@ -244,22 +244,15 @@ class Recovery:
         return T
 
     def _stage(self) -> int:
-        """The levelling recovery's stage (its standoffs; :data:`_TURN` in place): from the
-        first, one further for every ``recover_widen`` global registrations of the
-        recovery that were not reliable from its target with no occluder in view, up to
-        :data:`_LAST_STAGE`; ``recover_widen`` 0: one standoff throughout."""
+        """The levelling recovery's stage (its standoffs; :data:`_TURN` in place)."""
+        return self._stage_from(self._first_stage)
+
+    def _stage_from(self, first: int) -> int:
+        """The stage of a recovery that began at ``first``: one further for every
+        ``recover_widen`` global registrations of the recovery that were not reliable from
+        its target with no occluder in view, up to :data:`_MAX_STANDOFFS`;
+        ``recover_widen`` 0: one standoff throughout."""
         widen = self.params.recovery.recover_widen
         if widen == 0:
             return 1
-        return min(self._first_stage + self._widening_tries // widen, _LAST_STAGE)
-
-    def _back_off(self) -> float:
-        """How far back along the optical axis the recovery without a plane takes the camera,
-        m: ``recover_standoff``, once more for every ``recover_widen`` global registrations
-        that were not reliable from its target with no occluder in view, up to
-        :data:`_MAX_STANDOFFS` times it."""
-        p = self.params.recovery
-        if p.recover_widen == 0:
-            return p.recover_standoff
-        tried = self._widening_tries
-        return p.recover_standoff * min(1 + tried // p.recover_widen, _MAX_STANDOFFS)
+        return min(first + self._widening_tries // widen, _MAX_STANDOFFS)
