@@ -27,6 +27,28 @@ def test_point_cloud_accepts_float32_and_fortran_order(rng):
     np.testing.assert_allclose(cloud.points, points.astype(np.float64))
 
 
+def test_point_cloud_reads_every_layout_and_byte_order_alike(rng):
+    # Read in place (float64, float32, any strides, unaligned) or cast (another byte
+    # order, float16): the same values either way.
+    frame = rng.normal(size=(40, 6))
+    unaligned = np.frombuffer(b"\0" + frame.tobytes(), dtype=np.float64, offset=1)
+    layouts = {
+        "column views of (N, 6)": frame[:, :3],
+        "every other row": np.repeat(frame, 2, axis=0)[::2, :3],
+        "reversed rows": frame[::-1, :3][::-1],
+        "transposed": np.ascontiguousarray(frame[:, :3].T).T,
+        "unaligned": unaligned.reshape(40, 6)[:, :3],
+        "big-endian": frame[:, :3].astype(">f8"),
+    }
+    for name, points in layouts.items():
+        np.testing.assert_array_equal(svs.PointCloud(points).points, frame[:, :3], err_msg=name)
+    single = frame[:, 3:].astype(np.float32)
+    for points in (single, np.asfortranarray(single), single[:, ::-1][:, ::-1]):
+        np.testing.assert_array_equal(svs.PointCloud(points).points, single.astype(np.float64))
+    half = frame[:, :3].astype(np.float16)
+    np.testing.assert_array_equal(svs.PointCloud(half).points, half.astype(np.float64))
+
+
 @pytest.mark.parametrize(
     ("points", "message"),
     [

@@ -172,6 +172,7 @@ struct ModelAligner::Impl {
       t = Clock::now();
       detail::IcpSettings settings;
       settings.viewpoint = detail::declared_viewpoint(params);
+      settings.max_points = detail::kLocalIcpPoints;
       detail::refine_with_icp(
           model, scene, voxel_size, settings, dense_model,
           [&](const Transform& T) { return fitness_of(pose_of(T)); }, result);

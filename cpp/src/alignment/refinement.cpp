@@ -233,9 +233,10 @@ void polish_result_rotation(const Problem& problem, std::optional<TranslationWin
 }
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
-                     AlignResult& result) {
+                     AlignResult& result, Eigen::Index max_points) {
   IcpSettings settings;
   settings.viewpoint = problem.viewpoint;
+  settings.max_points = max_points;
   const double voxel_size = problem.params.scene.voxel_size;
   // The fine stage only for a densely sampled model (kIcpFineDistance).
   refine_with_icp(

@@ -74,10 +74,11 @@ void sweep_result_about(const Problem& problem, std::optional<TranslationWindow>
 void polish_result_rotation(const Problem& problem, std::optional<TranslationWindow>& window,
                             AlignResult& result);
 
-/// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole
-/// scene; kept unless it loses fitness.
+/// The ICP refinement of a result (AlignParams::refinement.icp_refinement, or
+/// LocalParams::icp with `max_points` kLocalIcpPoints), against the whole scene; kept
+/// unless it loses fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
-                     AlignResult& result);
+                     AlignResult& result, Eigen::Index max_points = IcpSettings().max_points);
 
 /// The two-stage point-to-plane ICP of `result`'s pose (`fine`: the second, tighter stage
 /// too), kept unless its fitness (`fitness_of` a pose) is more than a slide off the object

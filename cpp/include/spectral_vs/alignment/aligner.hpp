@@ -96,7 +96,8 @@ struct LocalParams {
                                  ///< farther phase-correlation peaks are ignored: for two views
                                  ///< of one scene, as in servoing. 0: unbounded (the paper).
   /// Without global search: the ICP of RefinementParams::icp_refinement after Algorithm 1,
-  /// with the same rule (kept unless it lowers fitness by more than 0.05). Beyond the
+  /// with the same rule (kept unless it lowers fitness by more than 0.05), on about 1000
+  /// of the model's points (a model within a voxel needs fewer pairs). Beyond the
   /// paper: a tracker's one-iteration estimate is pulled by geometry the model does not
   /// have (a tool left on the table: 15 mm and 8 degrees off at a fitness of 0.97,
   /// docs/servoing.md), which the ICP's pairs within a voxel leave out. Off: the paper's
