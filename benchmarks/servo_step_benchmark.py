@@ -173,9 +173,9 @@ def plain_parts(
 def prepare_scene(servo: Any, cloud: Any, params: Any) -> Any:
     """The current cloud cropped and downsampled as the servo does it (to
     ``ServoParams.downsample_size`` where the servo has it, else to half a voxel)."""
-    cropped = servo._crop(cloud)
+    cropped = servo._reference.crop(cloud)
     if hasattr(servo, "_prepare"):
-        return servo._prepare(cropped, "current")
+        return servo._reference.prepare(cropped, "current")
     return prepare(cropped, "current", params.voxel_size, True, (0, 0, 0))
 
 
@@ -248,7 +248,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             times, _ = cpu_ms(lambda scene=scene: tracking_aligner.align(scene), args.repeats)
             add("ModelAligner.align(), tracking bound", times)
         if plane_turn is not None:
-            normals = np.asarray(servo._crop(cloud).normals)
+            normals = np.asarray(servo._reference.crop(cloud).normals)
             T = np.asarray(result.T_scene_model)
             times, _ = cpu_ms(lambda n=normals, T=T: plane_turn.turn(n, T), args.repeats)
             add("plane turn", times)
@@ -280,12 +280,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 #: Methods of SpectralServo timed in the closed loop, and their stage names.
-SERVO_STAGES = {
-    "_crop": "crop (max_depth)",
-    "_prepare": "voxel downsampling",
-    "_relocalize": "relocalization (align_views)",
-    "twist": "control law",
-}
+#: The servo's parts timed in the closed loop: (part, method, stage).
+SERVO_STAGES = (
+    ("_reference", "crop", "crop (max_depth)"),
+    ("_reference", "prepare", "voxel downsampling"),
+    ("_gate", "drop_occluders", "occluder test"),
+    ("_relocalizer", "relocalize", "relocalization (align_views)"),
+    (None, "twist", "control law"),
+)
 
 
 class _TimedAligner:
@@ -333,16 +335,16 @@ def closed_loop(set_name: str, count: int, seed: int) -> dict[str, Any]:
             robot.reset_joint_positions(q)
             servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams())
             times: dict[str, float] = {}
-            for method, stage in SERVO_STAGES.items():
-                _timed(servo, method, stage, times)
-            _timed(servo._stale_frames, "check", "stale-frame test (fingerprint)", times)
-            _timed(servo_lib, "near_occluders", "occluder test", times)
-            if getattr(servo, "_plane_turn", None) is not None:
-                _timed(servo._plane_turn, "turn", "plane turn", times)
-            servo._aligner = _TimedAligner(servo._aligner, "registration", times)
-            if getattr(servo, "_tracking_aligner", None) is not None:
-                servo._tracking_aligner = _TimedAligner(
-                    servo._tracking_aligner, "registration, tracking bound", times
+            for part, method, stage in SERVO_STAGES:
+                _timed(getattr(servo, part) if part else servo, method, stage, times)
+            _timed(servo._gate.stale_frames, "check", "stale-frame test (fingerprint)", times)
+            if servo._tracker.plane_turn is not None:
+                _timed(servo._tracker.plane_turn, "turn", "plane turn", times)
+            prepared = servo._reference
+            prepared.aligner = _TimedAligner(prepared.aligner, "registration", times)
+            if prepared.tracking_aligner is not None:
+                prepared.tracking_aligner = _TimedAligner(
+                    prepared.tracking_aligner, "registration, tracking bound", times
                 )
             step_record = servo.step_record
 
@@ -395,15 +397,15 @@ def verification_cost(calls: int = 60) -> dict[str, float]:
             robot.reset_joint_positions(home + 0.03 * (np.asarray(q) - home))
             views.append(robot.capture())
     servo = servo_lib.SpectralServo(reference, servo_lib.ServoParams())
-    assert servo._tracking_aligner is not None
-    off = servo._tracking_aligner.params
+    assert servo._reference.tracking_aligner is not None
+    off = servo._reference.tracking_aligner.params
     on = copy.copy(off)
     on.verify = True
     aligners = {
         "verify off": _core.ModelAligner(servo.reference, off),
         "verify on": _core.ModelAligner(servo.reference, on),
     }
-    scenes = [servo._prepare(servo._crop(view), "current") for view in views]
+    scenes = [servo._reference.prepare(servo._reference.crop(view), "current") for view in views]
     times: dict[str, list[float]] = {name: [] for name in aligners}
     for _ in range(calls):
         for scene in scenes:

@@ -101,7 +101,9 @@ def test_servo_estimate_is_the_plain_alignment(views):
         view(scene, desired), ServoParams(mode="pose", downsample_size=0.0075, **SCALE)
     )
     T, result = servo.estimate(view(scene, current))
-    plain = _core._align(servo.reference, prepared(view(scene, current)), servo._align_params)
+    plain = _core._align(
+        servo.reference, prepared(view(scene, current)), servo._reference.align_params
+    )
     assert_same(result, plain)
     truth = np.linalg.inv(current) @ desired
     t, r = pose_error(np.linalg.inv(truth) @ T)

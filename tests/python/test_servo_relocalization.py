@@ -155,13 +155,13 @@ def test_the_arrival_check_refutes_a_goal_that_fits_poorly():
         record.translation_error, record.rotation_error = 0.002, 0.0
         record.visible_fitness = p.refute_fitness - 0.1
         servo._tracked.previous = near_goal
-        servo._check_arrival(near_goal, record)
+        servo._relocalizer.check_arrival(near_goal, record)
         assert record.refuted == (k == p.refute_steps - 1)
     assert servo.previous_estimate is None and servo._tracked.lost
     far = np.eye(4)
     far[:3, 3] = (0.3, 0.0, 0.0)
-    assert servo._arrival.near_refuted(near_goal, servo._odometry.since_first)
-    assert not servo._arrival.near_refuted(far, servo._odometry.since_first)
+    assert servo._relocalizer.arrival.near_refuted(near_goal, servo._odometry.since_first)
+    assert not servo._relocalizer.arrival.near_refuted(far, servo._odometry.since_first)
 
 
 def test_a_refuted_goal_is_placed_by_the_odometry():

@@ -300,7 +300,7 @@ def test_a_view_emptied_by_what_stands_above_the_scene_holds_and_never_raises(sc
         record.occluded_points = len(cloud)
         return cloud.select(np.zeros(len(cloud), dtype=bool))
 
-    servo._recovery.drop_above_the_scene = everything_above  # type: ignore[method-assign]
+    servo._relocalizer.recovery.drop_above_the_scene = everything_above  # type: ignore[method-assign]
     current = view(scene, camera_pose((0.03, 0.02, -0.02), (-2.0, 3.0, -4.0)))
     for k in range(7):
         twist, status, record = servo.step_record(current, np.eye(4), now=0.1 * k)

@@ -52,7 +52,7 @@ def test_the_servo_uses_the_lengths_it_resolved():
     for name in SCALE_LENGTHS:
         assert getattr(servo.params, name) == getattr(servo.scale, name) > 0
         assert getattr(given, name) == 0.0
-    assert servo._align_params.voxel_size == servo.scale.voxel_size
+    assert servo._reference.align_params.voxel_size == servo.scale.voxel_size
     assert servo.params.resolved(scaled_reference(2.0)) == servo.params  # nothing left to derive
 
 

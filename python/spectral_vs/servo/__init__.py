@@ -37,10 +37,16 @@ The package, one module a job:
 - :mod:`~spectral_vs.servo.settings`: :class:`ServoParams`, grouped by stage;
 - :mod:`~spectral_vs.servo.scale`: the scale lengths derived from the reference
   (:class:`ServoScale`);
-- :mod:`~spectral_vs.servo.controller`: :class:`SpectralServo` and its step, with the plane
-  turn (:mod:`~spectral_vs.servo.plane_turn`), the sensor faults
-  (:mod:`~spectral_vs.servo.faults`) and the relocalization and recovery
-  (:mod:`~spectral_vs.servo.relocalization`) it runs inside the step;
+- :mod:`~spectral_vs.servo.controller`: :class:`SpectralServo`, whose step composes its
+  parts, each a class that owns its state: the reference's prepared sides
+  (:mod:`~spectral_vs.servo.reference`), the frame gate (faults, occluders, holds:
+  :mod:`~spectral_vs.servo.gate`), the relocalizer (global registrations, the arrival
+  check, the recovery: :mod:`~spectral_vs.servo.relocalizer`,
+  :mod:`~spectral_vs.servo.arrival`, :mod:`~spectral_vs.servo.recovery`), the tracker
+  (the step's registration and the plane turn: :mod:`~spectral_vs.servo.tracker`,
+  :mod:`~spectral_vs.servo.plane_turn`), the stop rule (:mod:`~spectral_vs.servo.stop`),
+  sharing the estimate held (:mod:`~spectral_vs.servo.estimate`) and the odometry
+  (:mod:`~spectral_vs.servo.frames`);
 - :mod:`~spectral_vs.servo.law`: the decoupled law and its saturation;
 - :mod:`~spectral_vs.servo.loop`: :func:`run_servo`;
 - :mod:`~spectral_vs.servo.records`: :class:`ServoStatus`, :class:`ServoRecord`,
@@ -56,6 +62,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from spectral_vs._core import field_share
 from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
 from spectral_vs.servo.controller import SpectralServo
 from spectral_vs.servo.loop import run_servo
@@ -68,7 +75,6 @@ from spectral_vs.servo.records import (
     ServoStatus,
     _empty_record,  # noqa: F401  (read by the tests)
 )
-from spectral_vs.servo.relocalization import field_share
 from spectral_vs.servo.scale import ServoScale
 from spectral_vs.servo.settings import ServoParams
 from spectral_vs.servo.stage_settings import (

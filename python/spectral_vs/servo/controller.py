@@ -4,51 +4,42 @@ guarded by the watchdog and the stop rule with its hysteresis."""
 
 from __future__ import annotations
 
-import copy
-import math
 import time
 
 import numpy as np
 
-from spectral_vs._core import (
-    AlignResult,
-    ModelAligner,
-    PointCloud,
-    ViewAlignParams,
-    calibrated_confidence,
-)
-from spectral_vs.poses import pose_error
+from spectral_vs._core import AlignResult, PointCloud
+from spectral_vs.poses import _pose, rotation_vector
 from spectral_vs.registration import CloudLike, as_cloud
-from spectral_vs.servo.arrival import ArrivalCheck
 from spectral_vs.servo.estimate import TrackedEstimate
-from spectral_vs.servo.faults import _OCCLUSION_REFERENCE_POINTS, SensorFaults
-from spectral_vs.servo.frames import Odometry, StaleFrames, StepClock
-from spectral_vs.servo.law import _rigid_inverse
-from spectral_vs.servo.plane_turn import _PlaneTurn
+from spectral_vs.servo.frames import Odometry
+from spectral_vs.servo.gate import FrameGate, checked_motion
+from spectral_vs.servo.law import _saturated_twist
 from spectral_vs.servo.records import (
     ServoRecord,
     ServoStatus,
     _converged_status,
     _empty_record,
 )
-from spectral_vs.servo.recovery import Recovery
-from spectral_vs.servo.relocalization import Relocalization
+from spectral_vs.servo.reference import ServoReference, check_points
+from spectral_vs.servo.relocalizer import Relocalizer
 from spectral_vs.servo.scale import resolve_scale
-from spectral_vs.servo.schedule import RelocalizationSchedule
 from spectral_vs.servo.settings import ServoParams
 from spectral_vs.servo.stop import StopRule
+from spectral_vs.servo.tracker import Tracker
 
 
-def _check_points(reference: PointCloud, min_points: int) -> None:
-    """Refuse a reference with fewer than ``min_points`` points (ValueError)."""
-    if len(reference) < min_points:
-        raise ValueError(
-            f"reference has {len(reference)} points, fewer than min_points = {min_points}"
-        )
-
-
-class SpectralServo(SensorFaults, Relocalization):
+class SpectralServo:
     """The servo controller: from the current cloud to a camera twist.
+
+    Each step passes the frame through its parts, each a small class that owns its state:
+    the frame gate (faults, occluders, holds: :class:`~spectral_vs.servo.gate.FrameGate`),
+    the relocalizer (global registrations, the arrival check, the recovery:
+    :class:`~spectral_vs.servo.relocalizer.Relocalizer`), the tracker (the registration of
+    the step: :class:`~spectral_vs.servo.tracker.Tracker`), the stop rule
+    (:class:`~spectral_vs.servo.stop.StopRule`) and the control law. They share the
+    estimate held (:class:`~spectral_vs.servo.estimate.TrackedEstimate`) and the camera's
+    odometry (:class:`~spectral_vs.servo.frames.Odometry`).
 
     Parameters
     ----------
@@ -66,6 +57,8 @@ class SpectralServo(SensorFaults, Relocalization):
         The settings used: a copy of ``params`` with every scale length resolved.
     scale : ServoScale
         The scale lengths resolved (m), the reference's extent and which were derived.
+    reference : PointCloud
+        The reference, cropped to ``max_depth``, downsampled, with normals.
 
     Raises
     ------
@@ -76,66 +69,41 @@ class SpectralServo(SensorFaults, Relocalization):
     def __init__(self, reference: CloudLike, params: ServoParams | None = None) -> None:
         given = params if params is not None else ServoParams()
         raw = as_cloud(reference, "reference")
-        _check_points(raw, given.faults.min_points)  # before its scale is measured
+        check_points(raw, given.faults.min_points)  # before its scale is measured
         self.params, self.scale = resolve_scale(given, raw)
-        cloud = self._crop(raw)
-        _check_points(cloud, given.faults.min_points)
-        self._align_params = self.params.align_params()
-        self._view_params = ViewAlignParams(**self.params.relocalization.view_overrides)
-        self.reference = self._prepare(cloud, "reference")
-        self._clock = StepClock()
-        self._stale_frames = StaleFrames()
-        self._odometry = Odometry()
+        self._reference = ServoReference(raw, self.params)
+        self.reference = self._reference.cloud
         self._tracked = TrackedEstimate()
-        # What the relocalization registers: the reference as captured, with its normals.
-        self._reference_view = cloud if cloud.has_normals else self.reference
-        # The reference's side of the registration (its EGI coefficients, centred points)
-        # is prepared once here; each step adds only the current cloud's work.
-        self._aligner = ModelAligner(self.reference, self._align_params)
-        self._tracking_aligner: ModelAligner | None = None
-        if self.params.uses_tracking():
-            tracking = copy.copy(self._align_params)
-            tracking.max_translation = self.params.registration.tracking_translation
-            tracking.local_icp = self.params.registration.tracking_icp
-            self._tracking_aligner = ModelAligner(self.reference, tracking)
-        self._centroid = np.asarray(self.reference.centroid())
-        self._plane_turn: _PlaneTurn | None = (
-            _PlaneTurn.of(self._reference_view, self._centroid, self.params, self._align_params)
-            if self.params.plane.plane_turn
-            else None
-        )
-        reference_points = np.asarray(cloud.points)
-        stride = max(1, math.ceil(len(reference_points) / _OCCLUSION_REFERENCE_POINTS))
-        self._occlusion_reference = np.array(reference_points[::stride], dtype=float)
-        self._recovery = Recovery.of(self._reference_view, self.params, self._prepare)
+        self._odometry = Odometry()
+        self._gate = FrameGate(self.params, self._reference.occlusion_points)
+        self._relocalizer = Relocalizer(self._reference, self._tracked, self._odometry)
+        self._tracker = Tracker(self._reference, self._tracked)
         self._stop_rule = StopRule(self.params)
-        self._arrival = ArrivalCheck(self.params)
-        self._schedule = RelocalizationSchedule(self.params)
         self.reset()
 
     def reset(self) -> None:
         """Forget the previous estimate (the watchdog's memory), the step count, whether the
         servo converged (``ServoParams.reengage_translation``) and what the fault tests
         remember (the last frame, the outage's start)."""
-        self._forget_estimate()
+        self._relocalizer.reset()
         self._tracked.reset()  # and no global registration taken in this run
+        self._tracker.last_turn = 0.0
         self._steps = 0
-        self._last_turn = 0.0
-        self._arrival.reset()
         self._stop_rule.reset()
-        self._reset_faults()
+        self._odometry.reset()
+        self._gate.reset()
 
     @property
     def last_turn(self) -> float:
         """The turn about the reference's dominant normal added to the last estimate, rad
         (0 without ``ServoParams.plane_turn`` or a dominant plane)."""
-        return self._last_turn
+        return self._tracker.last_turn
 
     @property
     def has_plane_turn(self) -> bool:
         """True when the estimates are turned about the reference's dominant normal
         (``ServoParams.plane_turn`` and a reference with a dominant plane)."""
-        return self._plane_turn is not None
+        return self._tracker.plane_turn is not None
 
     @property
     def previous_estimate(self) -> np.ndarray | None:
@@ -164,33 +132,34 @@ class SpectralServo(SensorFaults, Relocalization):
         result : AlignResult
             The registration (its ``T_scene_model`` before the turn).
         """
-        cloud = self._crop(as_cloud(current, "current"))
-        return self._estimate(cloud, initial_guess, self._aligner)
+        cloud = self._reference.crop(as_cloud(current, "current"))
+        scene, result = self._tracker.register(cloud, initial_guess, self._reference.aligner)
+        return self._tracker.turned(cloud, scene, np.asarray(result.T_scene_model)), result
 
-    def _estimate(
-        self, cloud: PointCloud, initial_guess: np.ndarray | None, aligner: ModelAligner
-    ) -> tuple[np.ndarray, AlignResult]:
-        """:meth:`estimate` of the cropped ``cloud`` with the given prepared reference."""
-        scene, result = self._register(cloud, initial_guess, aligner)
-        return self._turned(cloud, scene, np.asarray(result.T_scene_model)), result
+    def twist(self, T_current_desired: np.ndarray) -> tuple[np.ndarray, float]:
+        """The decoupled law and its saturation.
 
-    def _register(
-        self, cloud: PointCloud, initial_guess: np.ndarray | None, aligner: ModelAligner
-    ) -> tuple[PointCloud, AlignResult]:
-        """The downsampled ``cloud`` and the registration of the reference onto it, without
-        the plane turn (a step turns only the estimate it keeps)."""
-        scene = self._prepare(cloud, "current")
-        return scene, aligner.align(scene, initial_guess)
+        Parameters
+        ----------
+        T_current_desired : ndarray, shape (4, 4)
+            Pose of the desired camera frame in the current camera frame.
 
-    def _turned(self, cloud: PointCloud, scene: PointCloud, T: np.ndarray) -> np.ndarray:
-        """``T`` turned about the reference's dominant normal (``ServoParams.plane_turn``),
-        from the normals of ``cloud`` (those of its downsampled ``scene`` without)."""
-        self._last_turn = 0.0
-        if self._plane_turn is not None:
-            normals = np.asarray((cloud if cloud.has_normals else scene).normals)
-            self._last_turn = self._plane_turn.turn(normals, T)
-            T = self._plane_turn.turned(T, self._last_turn)
-        return T
+        Returns
+        -------
+        twist : ndarray, shape (6,)
+            ``(v, omega)`` of the camera in the current camera frame, m/s and rad/s:
+            ``v = lambda_t t``, ``omega = lambda_r theta u``, scaled down as a whole so that
+            ``|v| <= max_linear_speed`` and ``|omega| <= max_angular_speed``.
+        scale : float
+            The factor in (0, 1] that was applied.
+
+        Raises
+        ------
+        ValueError
+            If ``T_current_desired`` is not a finite 4 x 4 rigid transform.
+        """
+        T = _pose(T_current_desired, "T_current_desired")  # ValueError unless 4 x 4 and finite
+        return _saturated_twist(T[:3, 3], rotation_vector(T[:3, :3]), self.params.law)
 
     def step(
         self,
@@ -259,42 +228,48 @@ class SpectralServo(SensorFaults, Relocalization):
         """:meth:`step_record` without its CPU time: the frame's faults, the occluders, the
         relocalization or the recovery, the registration, the watchdog, the stop rule."""
         start = time.perf_counter()
-        now = self._clock.tick(now)
+        gate, relocalizer, tracked = self._gate, self._relocalizer, self._tracked
+        now = gate.clock.tick(now)
         motion = self._carry(T_previous_current)
         # A sensor's invalid returns are dropped at each step, never raised on.
         raw = as_cloud(current, "current", drop_non_finite=True)
-        cloud = self._crop(raw)
+        cloud = self._reference.crop(raw)
         record = _empty_record(self._steps, len(cloud))
         self._steps += 1
-        fault = self._frame_fault(raw, len(cloud), stamp)
+        fault = gate.fault(raw, len(cloud), stamp)
         if fault is not None:
             return self._hold(record, *fault, now, start)
-        cloud, occluded, hidden, outage = self._drop_occluders(cloud, record, motion)
+        # From the first occluded frame on, once the servo has an estimate it vouches for:
+        # a relocalization taken, or the lock-on.
+        vouched = tracked.locked and tracked.previous is not None
+        predicted = tracked.predicted(motion) if vouched else None
+        cloud, occluded, hidden, outage = gate.drop_occluders(cloud, record, predicted)
         if outage is not None:
             return self._hold(record, "occluded", outage, now, start)
 
         relocalize = self.params.relocalization.relocalize
-        if relocalize and not self._tracked.anchored:
-            cloud = self._recovery.drop_above_the_scene(cloud, record, self._odometry.since_first)
+        if relocalize and not tracked.anchored:
+            cloud = relocalizer.drop_above_the_scene(cloud, record)
             # What stands above the scene's plane may fill the view: an outage, as an
             # occluder over most of the view is (a start of the large set emptied its view
             # so, and the relocalization raised on the empty cloud).
-            emptied = self._too_few_left(cloud, record, "above the scene's plane")
+            emptied = gate.too_few_left(cloud, record, "above the scene's plane")
             if emptied is not None:
                 return self._hold(record, "occluded", emptied, now, start)
-        self._schedule.step()
-        if relocalize and self._tracked.lost and self._relocalization_due():
-            self._relocalize(cloud, record, motion)
+        relocalizer.schedule.step()
+        if relocalize and tracked.lost and relocalizer.due():
+            relocalizer.relocalize(cloud, record, motion)
             motion = self._odometry.since_accepted
-        if self._recovering():
+        if relocalizer.recovering():
             return self._recover(cloud, record, motion, now, start)
-        if relocalize and not self._tracked.anchored:
+        if relocalize and not tracked.anchored:
             # No estimate the verdict vouched for: the local registration from the
             # identity is unchecked, and is not turned into motion.
-            return self._hold(record, "unreliable", self._unreliable_message(record), now, start)
-        T = self._measure(cloud, record, motion, hidden)
+            why = relocalizer.unreliable_message(record)
+            return self._hold(record, "unreliable", why, now, start)
+        T = self._tracker.measure(cloud, record, motion, hidden)
 
-        jump = self._jump(T, motion)
+        jump = self._tracker.jump(T, motion)
         if occluded and not record.carried:
             # Ridden only when the registration of the rest is sound: a registration that
             # the occluder corrupted turns into no motion and trips no watchdog. A carried
@@ -311,107 +286,36 @@ class SpectralServo(SensorFaults, Relocalization):
         record.seconds = time.perf_counter() - start
         return record.twist, record.status, record
 
-    def _unreliable_message(self, record: ServoRecord) -> str:
-        """Why a step without an estimate holds: the last global registration's verdict."""
-        if record.relocalization_verdict:
-            return (
-                f"the global registration is {record.relocalization_verdict} (support score "
-                f"{record.relocalization_score:.3f}), not taken"
-            )
-        return "no reliable estimate yet; the next global registration is due later"
+    def _carry(self, T_previous_current: np.ndarray | None) -> np.ndarray:
+        """Add the camera's motion since the previous step (identity when not given) to the
+        odometry and to the stale-frame test's; return the motion since the last accepted
+        step (``T_accepted_current``)."""
+        if T_previous_current is not None:
+            step = checked_motion(T_previous_current)
+            self._odometry.carry(step)
+            self._gate.stale_frames.moved(step)
+        return self._odometry.since_accepted
 
-    def _registration(
-        self,
-        cloud: PointCloud,
-        record: ServoRecord,
-        guess: np.ndarray | None,
-        motion: np.ndarray,
-        hidden: float,
-    ) -> tuple[PointCloud, AlignResult]:
-        """The step's registration from ``guess``: within ``tracking_translation`` when it
-        may track (:meth:`_can_track`), redone with ``max_translation`` when a locked-on
-        tracking fit is poor over the part of the reference no occluder hides (``hidden``
-        is the share hidden); fills ``record.tracking``."""
-        # A relocalized step checks the global pose on the full grid once.
-        tracking = not record.relocalized and self._can_track(guess, motion)
-        if tracking:
-            assert self._tracking_aligner is not None
-            scene, result = self._register(cloud, guess, self._tracking_aligner)
-            # Once locked on, a poor fit may mean the answer lies beyond the tracking bound
-            # (the camera or the scene jumped): the full search decides, and the watchdog
-            # sees the jump. Before, a poor fit is the relocalization's to judge.
-            visible = result.fitness / max(1.0 - hidden, 1e-9)
-            tracking = not self._tracked.armed or visible >= self.params.watchdog.watchdog_fitness
-        if not tracking:
-            scene, result = self._register(cloud, guess, self._aligner)
-        record.tracking = tracking
-        return scene, result
+    def _hold(
+        self, record: ServoRecord, hold: str, message: str, now: float, start: float
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """Finish ``record`` as a held step (zero twist, nothing remembered), or stop with
+        ``"sensor_outage"`` when the holds have lasted longer than ``max_outage``."""
+        self._gate.hold(record, hold, message, now)
+        record.seconds = time.perf_counter() - start
+        return record.twist, record.status, record
 
-    def _measure(
-        self, cloud: PointCloud, record: ServoRecord, motion: np.ndarray, hidden: float
-    ) -> np.ndarray:
-        """The step's estimate ``T_current_desired``: the registration turned about the
-        plane, or the last estimate carried along the camera's motion before lock-on; fills
-        the record's estimate, errors, fitness (also over the ``hidden`` share's rest),
-        confidence and Algorithm 1's figures."""
-        p = self.params
-        guess = None
-        if (
-            p.registration.warm_start or self._tracked.anchored
-        ) and self._tracked.previous is not None:
-            guess = self._tracked.predicted(motion)
-        scene, result = self._registration(cloud, record, guess, motion, hidden)
-        last = result.history[-1] if len(result.history) else None
-        record.fitness = float(result.fitness)
-        # An occluder lowers the fitness by the share of the reference it hides: every
-        # test below reads the fitness over the rest.
-        record.visible_fitness = min(1.0, record.fitness / max(1.0 - hidden, 1e-9))
-        # Where the registration fits poorly the views share too little for Algorithm 1's
-        # step: the EGI correlation of two partial views peaks 10-20 degrees off the truth,
-        # and far from the goal the phase correlation's shift leaps by tens of mm from step
-        # to step. The last good estimate carried along the camera's measured motion is the
-        # estimate while the fitness is under watchdog_fitness, before lock-on and after.
-        record.carried = (
-            self._tracked.anchored
-            and guess is not None
-            and record.visible_fitness < p.watchdog.watchdog_fitness
-        )
-        T = np.asarray(result.T_scene_model)
-        # The plane turn is of the estimate the step keeps, and of the confidence's pose
-        # under its threshold: a carried step with a confident fit uses neither. An ICP
-        # that was kept (tracking_icp) already fixed the turn about the plane's normal,
-        # past the EGIs, whose off-plane normals a tool on the table biases (2.8 degrees).
-        poor = record.visible_fitness < p.relocalization.relocalize_fitness
-        record.icp = not record.carried and result.icp_iterations > 0
-        if (not record.carried or poor) and not record.icp:
-            T = self._turned(cloud, scene, T)
-        else:
-            self._last_turn = 0.0
-        # fitness / share >= fitness: the share is needed only under the threshold.
-        record.score = (
-            record.visible_fitness
-            if record.visible_fitness >= p.relocalization.relocalize_fitness
-            else self._field_score(T, record.visible_fitness, cloud)
-        )
-        # The confidence is of the estimate the step keeps: a carried one did not take the
-        # registration, and is calibrated apart.
-        record.confidence = calibrated_confidence(
-            record.score, "servo_carried" if record.carried else "servo"
-        )
-        if record.carried:
-            assert guess is not None
-            T = guess
-            self._last_turn = 0.0
-        record.T_current_desired = T
-        record.translation_error, record.rotation_error = pose_error(T)
-        record.iterations = int(result.iterations)
-        record.plane_turn = 0.0 if record.carried else self._last_turn
-        if last is not None:
-            record.translation_cost = float(last.translation_cost)
-            record.rotation_cost = float(last.rotation_cost)
-            record.translation_step = float(last.translation_step)
-            record.rotation_gradient = float(last.rotation_gradient)
-        return T
+    def _recover(
+        self, cloud: PointCloud, record: ServoRecord, motion: np.ndarray, now: float, start: float
+    ) -> tuple[np.ndarray, ServoStatus, ServoRecord]:
+        """A recovery step: the twist toward the pose that widens the view's overlap with
+        the reference, or the stop ``"lost"``; no registration runs."""
+        self._gate.clock.usable(now)  # the frame was usable: no sensor outage
+        T = self._relocalizer.recover(cloud, record, motion)
+        if T is not None:
+            record.twist, record.saturation = self.twist(T)
+        record.seconds = time.perf_counter() - start
+        return record.twist, record.status, record
 
     def _occluded_hold(self, record: ServoRecord, jump: str | None) -> str | None:
         """Why a step whose registration ran with an occluder in view holds: the estimate
@@ -428,14 +332,14 @@ class SpectralServo(SensorFaults, Relocalization):
         return None
 
     def _accept(self, T: np.ndarray, record: ServoRecord, now: float) -> None:
-        """Keep ``T`` as the previous estimate: the watchdog's and the warm start's memory,
-        the outage's clock, the lock-on and whether the servo is lost."""
+        """Keep ``T`` as the estimate: the watchdog's and the warm start's memory, the
+        outage's clock, the lock-on and whether the servo is lost."""
         p = self.params
         arms = record.visible_fitness >= p.watchdog.watchdog_fitness
         self._tracked.accept(T, arms, record.score >= p.relocalization.relocalize_fitness)
         self._odometry.accepted()
-        self._clock.usable(now)
-        self._schedule.accepted(record.relocalized, not self._tracked.lost)
+        self._gate.clock.usable(now)
+        self._relocalizer.schedule.accepted(record.relocalized, not self._tracked.lost)
 
     def _command(self, T: np.ndarray, record: ServoRecord) -> None:
         """The stop rule with its hysteresis, else the twist toward ``T``."""
@@ -443,39 +347,4 @@ class SpectralServo(SensorFaults, Relocalization):
             record.status = _converged_status(record.translation_error, record.rotation_error)
         else:
             record.twist, record.saturation = self.twist(T)
-            self._check_arrival(T, record)
-
-    def _can_track(self, guess: np.ndarray | None, motion: np.ndarray | None) -> bool:
-        """Whether this registration may seek only ``tracking_translation``: locked on (the
-        watchdog armed, or a relocalization taken), and
-        the predicted estimate moves the reference's centroid by at most half of it from
-        the registration's start ``guess`` (identity when None); ``motion`` as for
-        :meth:`TrackedEstimate.predicted`."""
-        locked = self._tracked.locked
-        if self._tracking_aligner is None or not locked or self._tracked.previous is None:
-            return False
-        predicted = self._tracked.predicted(motion)
-        start = np.eye(4) if guess is None else np.asarray(guess, dtype=float)
-        c = self._centroid
-        moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
-        return bool(np.abs(moved).max() <= 0.5 * self.params.registration.tracking_translation)
-
-    def _jump(self, T: np.ndarray, motion: np.ndarray | None) -> str | None:
-        """A message when ``T`` is implausibly far from the previous estimate carried along
-        ``motion`` (as for :meth:`TrackedEstimate.predicted`), else None."""
-        if self._tracked.previous is None or not self._tracked.armed:
-            return None
-        predicted = self._tracked.predicted(motion)
-        # |translation| of predicted^-1 T is |t - t_predicted|: the two parts are independent.
-        moved, turned = pose_error(_rigid_inverse(predicted) @ T)
-        p = self.params
-        if moved > p.watchdog.jump_limit_translation or turned > p.watchdog.jump_limit_rotation:
-            return (
-                f"the estimate changed by {1000 * moved:.1f} mm and {math.degrees(turned):.2f} "
-                f"deg in one step (limits {1000 * p.watchdog.jump_limit_translation:.1f} mm, "
-                f"{math.degrees(p.watchdog.jump_limit_rotation):.2f} deg)"
-            )
-        return None
-
-
-# --------------------------------------------------------------------------- the loop
+            self._relocalizer.check_arrival(T, record)
