@@ -37,15 +37,6 @@ constexpr Choices<SceneView, 3> kSceneViews{{{"auto", SceneView::automatic},
                                              {"single_view", SceneView::single_view},
                                              {"all_sides", SceneView::all_sides}}};
 
-// The deprecated scene_viewpoint, as the one setting it stands for: a single view from it.
-void warn_scene_viewpoint() {
-  if (PyErr_WarnEx(PyExc_DeprecationWarning,
-                   "AlignParams.scene_viewpoint is deprecated: use sensor_origin (and "
-                   "scene_view='single_view' to declare a single view; 'auto' detects one)",
-                   2) != 0)
-    throw py::error_already_set();
-}
-
 void define_align_groups(py::module_& m) {
   py::class_<SceneParams> scene(m, "SceneParams", R"doc(
 The scene and its representation: ``AlignParams.scene``, read by every stage of
@@ -74,9 +65,6 @@ scene_view : str
     saw (the model rendered from there, pixel by pixel against the scan's depth), which
     tells a pose from its flip; without a support plane the whole view is searched as
     one part.
-scene_viewpoint : ndarray (3,) or None
-    Deprecated alias: setting it sets sensor_origin and scene_view='single_view' (None:
-    scene_view='auto'); reading it gives sensor_origin for a declared single view.
 suppress_support_plane : bool
     With global search: search the scene without its support plane (a plane wider than 4
     model reaches holding over a fifth of the points, e.g. a table; fitness still sees
@@ -85,7 +73,6 @@ suppress_support_plane : bool
     facing the sensor of a single view by phase correlation in a window around the part,
     at twice the voxel and then at the voxel (default True).
 )doc");
-  scene.attr("_deprecated_aliases") = py::make_tuple("scene_viewpoint");
   define_settings(scene)
       .def_readwrite("voxel_size", &SceneParams::voxel_size)
       .def_readwrite("bandwidth", &SceneParams::bandwidth)
@@ -106,22 +93,6 @@ suppress_support_plane : bool
           "scene_view", [](const SceneParams& p) { return choice_name(p.scene_view, kSceneViews); },
           [](SceneParams& p, const std::string& s) {
             p.scene_view = parse_choice(s, kSceneViews, "scene_view");
-          })
-      .def_property(
-          "scene_viewpoint",
-          [](const SceneParams& p) -> std::optional<Eigen::Vector3d> {
-            warn_scene_viewpoint();
-            if (p.scene_view != SceneView::single_view) return std::nullopt;
-            return p.sensor_origin;
-          },
-          [](SceneParams& p, const std::optional<Eigen::Vector3d>& origin) {
-            warn_scene_viewpoint();
-            if (origin) {
-              p.sensor_origin = *origin;
-              p.scene_view = SceneView::single_view;
-            } else {
-              p.scene_view = SceneView::automatic;
-            }
           })
       .def_readwrite("suppress_support_plane", &SceneParams::suppress_support_plane);
 
@@ -550,9 +521,9 @@ that keeps unconstrained directions finite (docs/trust.md).
       .def_readonly(
           "fitness", &AlignResult::fitness,
           "How well the scene supports the pose, in [0, 1]: the share of the model's occupied "
-          "voxels next to scene points with like normals; with scene_viewpoint, "
+          "voxels next to scene points with like normals; for a single view, "
           "confirmed / (confirmed + contradicted + hidden / 2) over the pixels of the "
-          "model rendered from there.")
+          "model rendered from sensor_origin.")
       .def_readonly("correlation", &AlignResult::correlation)
       .def_readonly("translation_peak", &AlignResult::translation_peak)
       .def_readonly("hypothesis", &AlignResult::hypothesis)

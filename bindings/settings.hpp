@@ -4,7 +4,6 @@
 // field, equality, copy and deepcopy. The fields are the struct's bound properties (its
 // def_readwrite and def_property), found on the class when called, in the order they were
 // bound: a field added to the binding is in the constructor and the repr with no other line.
-// A deprecated alias (listed in the class's `_deprecated_aliases`) is a keyword only.
 // A nested group of settings (`define_group`: `params.search`, itself such a struct, listed
 // in `_groups`) is a property whose fields are also the outer struct's, under the same
 // names: the outer struct's repr and equality are those of its flat fields, and its
@@ -23,16 +22,6 @@ namespace py = pybind11;
 
 namespace settings_detail {
 
-/// The deprecated aliases of the bound class `type`: settable properties that stand for
-/// other fields (its `_deprecated_aliases`, a tuple of names; none if it has none).
-inline std::vector<std::string> alias_names(const py::handle& type) {
-  std::vector<std::string> names;
-  if (py::hasattr(type, "_deprecated_aliases")) {
-    for (const auto& name : type.attr("_deprecated_aliases")) names.push_back(py::str(name));
-  }
-  return names;
-}
-
 /// The nested groups of the bound class `type` (its `_groups`, a tuple of names; none if
 /// it has none): settable, but not fields of their own (their fields are).
 inline std::vector<std::string> group_names(const py::handle& type) {
@@ -43,12 +32,9 @@ inline std::vector<std::string> group_names(const py::handle& type) {
   return names;
 }
 
-/// The settable properties of the bound class `type`, in the order they were bound; with
-/// `aliases` off, without its deprecated aliases (the repr and equality show and compare
-/// the fields they stand for, and reading an alias warns).
-inline std::vector<std::string> field_names(const py::handle& type, bool aliases = false) {
+/// The settable properties of the bound class `type`, in the order they were bound.
+inline std::vector<std::string> field_names(const py::handle& type) {
   const py::object property = py::module_::import("builtins").attr("property");
-  const std::vector<std::string> deprecated = alias_names(type);
   const std::vector<std::string> groups = group_names(type);
   std::vector<std::string> names;
   for (const auto& item : type.attr("__dict__").attr("items")()) {
@@ -57,8 +43,6 @@ inline std::vector<std::string> field_names(const py::handle& type, bool aliases
     if (name.rfind('_', 0) == 0 || !py::isinstance(pair[1], property)) continue;
     if (pair[1].attr("fset").is_none()) continue;  // read-only: not a setting
     if (std::find(groups.begin(), groups.end(), name) != groups.end()) continue;
-    const bool alias = std::find(deprecated.begin(), deprecated.end(), name) != deprecated.end();
-    if (alias && !aliases) continue;
     names.push_back(name);
   }
   return names;
@@ -78,7 +62,7 @@ inline std::string value_repr(const py::handle& value) {
 /// that is no field (with the closest field names) or a value of the wrong type.
 inline void set_fields(const py::object& self, const py::kwargs& fields) {
   const std::string name = type_name(self);
-  std::vector<std::string> names = field_names(py::type::of(self), true);
+  std::vector<std::string> names = field_names(py::type::of(self));
   for (const auto& group : group_names(py::type::of(self))) names.push_back(group);
   for (const auto& [key_handle, value] : fields) {
     const std::string key = py::str(key_handle);
@@ -159,8 +143,7 @@ py::class_<Params, Options...>& define_settings(py::class_<Params, Options...>& 
 /// reference: `params.search.hypotheses = 8` changes params; assigned, or given as the
 /// keyword `Params(search=...)`, a copy of the group: as ServoParams takes its groups), and
 /// each field of the group's bound class (`define_settings`, bound before) as a field of
-/// `cls` of the same name that reads and writes it there (`params.hypotheses = 8`). The
-/// group's deprecated aliases become `cls`'s too.
+/// `cls` of the same name that reads and writes it there (`params.hypotheses = 8`).
 template <typename Params, typename Group, typename... Options>
 void define_group(py::class_<Params, Options...>& cls, const char* name, Group Params::*member,
                   const char* doc) {
@@ -174,7 +157,7 @@ void define_group(py::class_<Params, Options...>& cls, const char* name, Group P
   cls.attr("_groups") = py::tuple(groups);
   const py::handle group = py::type::of<Group>();
   const std::string group_name = name;
-  for (const std::string& field : settings_detail::field_names(group, true)) {
+  for (const std::string& field : settings_detail::field_names(group)) {
     const py::cpp_function get([group_name, field](const py::object& self) {
       return py::object(self.attr(group_name.c_str()).attr(field.c_str()));
     });
@@ -183,13 +166,6 @@ void define_group(py::class_<Params, Options...>& cls, const char* name, Group P
     });
     const std::string field_doc = "``" + group_name + "." + field + "``";
     cls.def_property(field.c_str(), get, set, field_doc.c_str());
-  }
-  const std::vector<std::string> aliases = settings_detail::alias_names(group);
-  if (!aliases.empty()) {
-    py::list all;
-    for (const auto& alias : settings_detail::alias_names(cls)) all.append(alias);
-    for (const auto& alias : aliases) all.append(alias);
-    cls.attr("_deprecated_aliases") = py::tuple(all);
   }
 }
 

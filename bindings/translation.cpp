@@ -50,16 +50,6 @@ VoxelGrid to_grid(const py::handle& object, const char* argument) {
   return grid;
 }
 
-void warn_tuple_unpacking() {
-  if (PyErr_WarnEx(PyExc_DeprecationWarning,
-                   "phase_correlation() returns a TranslationEstimate: unpacking or indexing it "
-                   "as the tuple (shift in voxels, peak) is deprecated and will be removed in "
-                   "0.3; use .shift (metres), .shift_voxels or .peak",
-                   2) != 0) {
-    throw py::error_already_set();
-  }
-}
-
 PhaseCorrelationParams make_params(bool subvoxel, double band, int threads, long long max_voxels) {
   PhaseCorrelationParams params;
   params.subvoxel = subvoxel;
@@ -91,20 +81,6 @@ peak : float
       .def_readonly("peak_voxels", &TranslationEstimate::peak_voxels,
                     "Integer correlation peak, voxels.")
       .def_readonly("peak", &TranslationEstimate::peak, "Normalised peak height in [0, 1].")
-      // phase_correlation() returned the tuple (shift in voxels, peak) before it returned
-      // this: unpacking and indexing still give that tuple, with a DeprecationWarning.
-      .def("__iter__",
-           [](const TranslationEstimate& e) {
-             warn_tuple_unpacking();
-             return py::iter(py::make_tuple(e.shift_voxels, e.peak));
-           })
-      .def(
-          "__getitem__",
-          [](const TranslationEstimate& e, py::ssize_t i) -> py::object {
-            warn_tuple_unpacking();
-            return py::make_tuple(e.shift_voxels, e.peak)[py::int_(i)];
-          },
-          py::arg("index"))
       .def("__repr__", [](const TranslationEstimate& e) {
         std::ostringstream out;
         out << "TranslationEstimate(shift=[" << e.shift.x() << ", " << e.shift.y() << ", "
@@ -143,28 +119,14 @@ max_voxels : int
       .def(
           "estimate",
           [](PhaseCorrelation& self, const VoxelGrid& moving,
-             std::optional<Eigen::Vector3i> max_shift_voxels,
-             std::optional<Eigen::Vector3i> max_shift) {
-            if (max_shift) {
-              if (max_shift_voxels)
-                throw py::type_error(
-                    "estimate() takes max_shift and max_shift_voxels, not "
-                    "both: max_shift is the deprecated name");
-              if (PyErr_WarnEx(PyExc_DeprecationWarning,
-                               "PhaseCorrelation.estimate(max_shift=...) is deprecated: use "
-                               "max_shift_voxels=... (the bound is in voxels per axis)",
-                               1) != 0)
-                throw py::error_already_set();
-              max_shift_voxels = max_shift;
-            }
+             std::optional<Eigen::Vector3i> max_shift_voxels) {
             py::gil_scoped_release release;
             return max_shift_voxels ? self.estimate(moving, *max_shift_voxels)
                                     : self.estimate(moving);
           },
-          py::arg("moving"), py::arg("max_shift_voxels") = py::none(), py::kw_only(),
-          py::arg("max_shift") = py::none(),
+          py::arg("moving"), py::arg("max_shift_voxels") = py::none(),
           "Shift of `moving` onto the target; `max_shift_voxels` (voxels per axis, integers) "
-          "bounds the search. `max_shift` is its deprecated name.")
+          "bounds the search.")
       .def_property_readonly("has_target", &PhaseCorrelation::has_target)
       .def_property_readonly("spec", &PhaseCorrelation::spec);
 

@@ -47,8 +47,7 @@ window_search_below : float
     large as the reference.
 sensor_origin : ndarray (3,)
     The current view's sensor origin in its coordinates, m (the origin for a depth
-    camera's cloud in its own frame), as AlignParams.sensor_origin. current_viewpoint is
-    a deprecated alias (DeprecationWarning).
+    camera's cloud in its own frame), as AlignParams.sensor_origin.
 max_seconds : float
     Time budget, s (0: none).
 threads : int
@@ -75,14 +74,6 @@ void set_origin(ViewAlignParams& p, const py::handle& value, const char* name) {
   if (!array || array.size() != 3)
     throw py::value_error(std::string(name) + " must be 3 numbers (metres)");
   p.sensor_origin = Eigen::Vector3d(array.at(0), array.at(1), array.at(2));
-}
-
-void warn_current_viewpoint() {
-  if (PyErr_WarnEx(PyExc_DeprecationWarning,
-                   "ViewAlignParams.current_viewpoint is deprecated: use sensor_origin, as "
-                   "AlignParams names the sensor",
-                   2) != 0)
-    throw py::error_already_set();
 }
 
 }  // namespace
@@ -113,7 +104,6 @@ void define_view_aligner(py::module_& m) {
       "from their median, search voxel twice that.");
 
   py::class_<ViewAlignParams> params(m, "ViewAlignParams", kViewAlignParamsDoc);
-  params.attr("_deprecated_aliases") = py::make_tuple("current_viewpoint");
   define_settings(params)
       .def_readwrite("voxel_size", &ViewAlignParams::voxel_size)
       .def_readwrite("search_voxel_size", &ViewAlignParams::search_voxel_size)
@@ -130,16 +120,6 @@ void define_view_aligner(py::module_& m) {
           [](const ViewAlignParams& p) { return Eigen::Vector3d(p.sensor_origin); },
           [](ViewAlignParams& p, const py::handle& value) {
             set_origin(p, value, "sensor_origin");
-          })
-      .def_property(
-          "current_viewpoint",
-          [](const ViewAlignParams& p) {
-            warn_current_viewpoint();
-            return Eigen::Vector3d(p.sensor_origin);
-          },
-          [](ViewAlignParams& p, const py::handle& value) {
-            warn_current_viewpoint();
-            set_origin(p, value, "current_viewpoint");
           })
       .def_readwrite("max_seconds", &ViewAlignParams::max_seconds)
       .def_readwrite("threads", &ViewAlignParams::threads)

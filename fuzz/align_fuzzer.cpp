@@ -103,9 +103,10 @@ AlignParams random_params(FuzzedDataProvider& in) {
   if (in.ConsumeBool()) p.search.window_margin = in.ConsumeFloatingPointInRange(0.001, 0.1);
   if (in.ConsumeBool()) p.local.max_translation = in.ConsumeFloatingPointInRange(0.001, 0.2);
   if (in.ConsumeBool()) {
-    p.scene.scene_viewpoint = Eigen::Vector3d(in.ConsumeFloatingPointInRange(-1.0, 1.0),
-                                              in.ConsumeFloatingPointInRange(-1.0, 1.0),
-                                              in.ConsumeFloatingPointInRange(-1.0, 1.0));
+    p.scene.sensor_origin = Eigen::Vector3d(in.ConsumeFloatingPointInRange(-1.0, 1.0),
+                                            in.ConsumeFloatingPointInRange(-1.0, 1.0),
+                                            in.ConsumeFloatingPointInRange(-1.0, 1.0));
+    p.scene.scene_view = SceneView::single_view;
   }
   p.scene.suppress_support_plane = in.ConsumeBool();
   p.refinement.polish = in.ConsumeBool();

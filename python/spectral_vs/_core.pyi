@@ -15,7 +15,6 @@ or run ``pybind11-stubgen spectral_vs._core`` and copy the new lines here in thi
 """
 
 import os
-from collections.abc import Iterator
 from typing import Any, ClassVar, Literal, TypeAlias, overload
 
 import numpy as np
@@ -237,10 +236,6 @@ class TranslationEstimate:
     def peak_voxels(self) -> _IntArray: ...  # (3,), voxels
     @property
     def peak(self) -> float: ...  # in [0, 1]
-    # Deprecated (removed in 0.3): unpacking or indexing gives the tuple (shift_voxels,
-    # peak) that phase_correlation() returned before 0.2, with a DeprecationWarning.
-    def __iter__(self) -> Iterator[Any]: ...
-    def __getitem__(self, index: int) -> Any: ...
 
 class PhaseCorrelation:
     """Phase correlation (eq. 7) against a cached target on a fixed grid."""
@@ -258,8 +253,6 @@ class PhaseCorrelation:
         self,
         moving: VoxelGrid,
         max_shift_voxels: npt.ArrayLike | None = None,  # (3,) int, voxels per axis
-        *,
-        max_shift: npt.ArrayLike | None = None,  # deprecated: max_shift_voxels
     ) -> TranslationEstimate: ...
     @property
     def has_target(self) -> bool: ...
@@ -406,7 +399,6 @@ class SceneParams:
         egi_method: str = ...,
         sensor_origin: npt.ArrayLike = ...,
         scene_view: str = ...,
-        scene_viewpoint: npt.ArrayLike | None = ...,
         suppress_support_plane: bool = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
@@ -422,10 +414,6 @@ class SceneParams:
     @sensor_origin.setter
     def sensor_origin(self, value: npt.ArrayLike) -> None: ...
     scene_view: str  # "auto", "single_view" or "all_sides"
-    @property
-    def scene_viewpoint(self) -> _Array | None: ...  # deprecated: sensor_origin, scene_view
-    @scene_viewpoint.setter
-    def scene_viewpoint(self, value: npt.ArrayLike | None) -> None: ...
     suppress_support_plane: bool
 
 class LocalParams:
@@ -534,7 +522,6 @@ class AlignParams:
         egi_method: str = ...,
         sensor_origin: npt.ArrayLike = ...,
         scene_view: str = ...,
-        scene_viewpoint: npt.ArrayLike | None = ...,
         suppress_support_plane: bool = ...,
         local: LocalParams = ...,
         translation_gain: float = ...,
@@ -601,10 +588,6 @@ class AlignParams:
     @sensor_origin.setter
     def sensor_origin(self, value: npt.ArrayLike) -> None: ...
     scene_view: str  # "auto", "single_view" or "all_sides"
-    @property
-    def scene_viewpoint(self) -> _Array | None: ...  # deprecated: sensor_origin, scene_view
-    @scene_viewpoint.setter
-    def scene_viewpoint(self, value: npt.ArrayLike | None) -> None: ...
     suppress_support_plane: bool
     translation_gain: float
     rotation_gain: float
@@ -917,7 +900,6 @@ class ViewAlignParams:
         icp_refinement: bool = ...,
         window_search_below: float = ...,
         sensor_origin: npt.ArrayLike = ...,
-        current_viewpoint: npt.ArrayLike = ...,
         max_seconds: float = ...,
         threads: int = ...,
         occupancy: str = ...,
@@ -942,10 +924,6 @@ class ViewAlignParams:
     def sensor_origin(self) -> _Array: ...  # (3,) metres
     @sensor_origin.setter
     def sensor_origin(self, value: npt.ArrayLike) -> None: ...
-    @property
-    def current_viewpoint(self) -> _Array: ...  # deprecated: sensor_origin
-    @current_viewpoint.setter
-    def current_viewpoint(self, value: npt.ArrayLike) -> None: ...
     max_seconds: float
     threads: int
     occupancy: str  # "trilinear", "binary" or "count"

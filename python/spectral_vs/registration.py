@@ -6,7 +6,6 @@ import copy
 import difflib
 import math
 import numbers
-import warnings
 from typing import Any
 
 import numpy as np
@@ -84,6 +83,15 @@ def as_cloud(cloud: CloudLike, argument: str, drop_non_finite: bool = False) -> 
     return PointCloud(array)
 
 
+#: Keywords removed in 0.3 (0.2's deprecated aliases) and what stands for each now.
+_REMOVED_KEYWORDS = {
+    "viewpoint": "sensor_origin",
+    "scene_viewpoint": "sensor_origin (and scene_view='single_view')",
+    "current_viewpoint": "sensor_origin",
+    "reference_viewpoint": "reference_sensor_origin",
+}
+
+
 def with_overrides(params: Any, kind: type, overrides: dict[str, Any], what: str) -> Any:
     """A copy of ``params`` (a ``kind``, or ``kind()`` for None) with the fields of
     ``overrides`` set: the caller's settings never change.
@@ -103,6 +111,8 @@ def with_overrides(params: Any, kind: type, overrides: dict[str, Any], what: str
             fields = [f for f in dir(settings) if not f.startswith("_")]
             close = difflib.get_close_matches(name, fields, 3, 0.6)
             hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+            if name in _REMOVED_KEYWORDS:
+                hint = f" (removed in 0.3: use {_REMOVED_KEYWORDS[name]})"
             raise TypeError(f"unknown {what} {name!r}: no {kind.__name__} field of that name{hint}")
         try:
             setattr(settings, name, value)
@@ -192,35 +202,6 @@ def prepare(
     return cloud
 
 
-_UNSET: Any = object()
-
-
-def _deprecated_viewpoints(overrides: dict[str, Any], viewpoint: Any) -> dict[str, Any]:
-    """``overrides`` with the deprecated viewpoint arguments turned into ``sensor_origin``
-    (and, for ``scene_viewpoint``, ``scene_view``), each with a ``DeprecationWarning``."""
-    overrides = dict(overrides)
-    if "scene_viewpoint" in overrides:
-        old = overrides.pop("scene_viewpoint")
-        warnings.warn(
-            "align(scene_viewpoint=...) is deprecated: use sensor_origin=... (and "
-            "scene_view='single_view' to declare a single view; the default 'auto' detects one)",
-            DeprecationWarning,
-            stacklevel=3,
-        )
-        if old is not None:
-            overrides.setdefault("sensor_origin", check_viewpoint(old, "scene_viewpoint"))
-            overrides.setdefault("scene_view", "single_view")
-    if viewpoint is not _UNSET:
-        warnings.warn(
-            "align(viewpoint=...) is deprecated: use sensor_origin=..., the one sensor origin "
-            "that orients estimated normals and from which a single view is detected",
-            DeprecationWarning,
-            stacklevel=3,
-        )
-        overrides.setdefault("sensor_origin", check_viewpoint(viewpoint))
-    return overrides
-
-
 def derived_voxel_size(settings: AlignParams, model: PointCloud, scene: PointCloud) -> AlignParams:
     """``settings`` with ``voxel_size = 0`` replaced by :func:`alignment_voxel_size` of the
     clouds as given (before any downsampling): both are then prepared at it."""
@@ -238,7 +219,6 @@ def align(
     params: AlignParams | None = None,
     *,
     downsample: bool = True,
-    viewpoint: Any = _UNSET,
     **overrides: Any,
 ) -> AlignResult:
     """Align ``model`` onto ``scene``: Algorithm 1 with, by default, a global rotation search.
@@ -258,15 +238,12 @@ def align(
         Settings; defaults to ``AlignParams()``.
     downsample : bool
         Voxel-downsample both clouds to half the voxel size first (default True).
-    viewpoint : array_like (3,)
-        Deprecated alias of ``sensor_origin`` (``DeprecationWarning``).
     **overrides
         Any :class:`AlignParams` field, e.g. ``voxel_size=0.005, global_search=False``.
         The sensor: ``sensor_origin`` (metres, default the origin) orients estimated
         normals, and with ``scene_view='auto'`` (default) the scene is checked as a single
         view from it when :func:`detect_single_view` finds one; ``'single_view'`` declares
-        one, ``'all_sides'`` never (a full model, a fused map). ``scene_viewpoint=p`` is a
-        deprecated alias of ``sensor_origin=p, scene_view='single_view'``.
+        one, ``'all_sides'`` never (a full model, a fused map).
         ``voxel_size=0`` (default) derives the voxel from the model
         (:func:`alignment_voxel_size`).
 
@@ -299,7 +276,6 @@ def align(
     case. ``max_seconds`` counts from the start of the C++ alignment, after downsampling
     and normal estimation.
     """
-    overrides = _deprecated_viewpoints(overrides, viewpoint)
     settings = with_overrides(params, AlignParams, overrides, "alignment setting")
     origin = np.asarray(settings.sensor_origin, dtype=float)
     model_cloud, scene_cloud = as_cloud(model, "model"), as_cloud(scene, "scene")

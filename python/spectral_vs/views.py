@@ -71,8 +71,7 @@ def align_views(
         Settings; defaults to ``ViewAlignParams()`` (every length derived from the views).
     reference_sensor_origin : array_like (3,)
         The reference view's sensor origin in its coordinates, metres (default the
-        origin); used only to orient estimated normals. ``reference_viewpoint`` is a
-        deprecated alias (``DeprecationWarning``).
+        origin); used only to orient estimated normals.
     prior : array_like (4, 4), optional
         A ``T_current_reference`` known from elsewhere (a tracker's estimate): refined and
         scored beside the search's hypotheses, and returned (``hypothesis`` -1) unless a
@@ -82,7 +81,6 @@ def align_views(
         The current view's sensor: ``sensor_origin`` (metres, in its coordinates, default
         the origin: a depth camera's cloud in its own frame), as in :func:`align`; the
         support check renders from it and estimated normals turn toward it.
-        ``current_viewpoint`` is a deprecated alias (``DeprecationWarning``).
 
     Returns
     -------
@@ -104,22 +102,6 @@ def align_views(
         For ``params`` that is not a :class:`ViewAlignParams`, or an unknown setting in
         ``overrides`` (named).
     """
-    overrides = dict(overrides)
-    if "reference_viewpoint" in overrides:
-        warnings.warn(
-            "align_views(reference_viewpoint=...) is deprecated: use reference_sensor_origin=...",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        reference_sensor_origin = overrides.pop("reference_viewpoint")
-    if "current_viewpoint" in overrides:
-        warnings.warn(
-            "align_views(current_viewpoint=...) is deprecated: use sensor_origin=..., the "
-            "current view's sensor origin as AlignParams.sensor_origin names it",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        overrides.setdefault("sensor_origin", overrides.pop("current_viewpoint"))
     settings = with_overrides(params, ViewAlignParams, overrides, "view alignment setting")
     current_origin = check_viewpoint(settings.sensor_origin, "sensor_origin")
     reference_origin = check_viewpoint(reference_sensor_origin, "reference_sensor_origin")

@@ -954,9 +954,9 @@ std::vector<Case> cases() {
       {"align_viewpoint_nan",
        [] {
          align(object(), object(),
-               with([](AlignParams& p) { p.scene.scene_viewpoint = Eigen::Vector3d(kNaN, 0, 0); }));
+               with([](AlignParams& p) { p.scene.sensor_origin = Eigen::Vector3d(kNaN, 0, 0); }));
        },
-       "scene_viewpoint must be finite"},
+       "sensor_origin must be finite"},
       {"align_tiny_voxel",
        [] { align(object(), object(), with([](AlignParams& p) { p.scene.voxel_size = 1e-5; })); },
        "max_voxels"},

@@ -235,19 +235,6 @@ TEST(SingleView, AlignChecksADetectedViewAndOnlyThen) {
   params.scene.scene_view = SceneView::single_view;
   params.scene.sensor_origin = Eigen::Vector3d(0.0, 0.0, 2.0);
   EXPECT_TRUE(align(model, box, params).single_view);  // declared: not detected
-  // The deprecated field stands for a declared single view from it.
-  AlignParams old;
-  old.local.max_iterations = 5;
-  old.search.hypotheses = 4;
-  old.search.refinements = 1;
-  old.scene.scene_view = SceneView::all_sides;
-  old.scene.scene_viewpoint = Eigen::Vector3d::Zero();
-  AlignParams declared = old;
-  declared.scene.scene_viewpoint.reset();
-  declared.scene.scene_view = SceneView::single_view;
-  const AlignResult a = align(model, view, old), b = align(model, view, declared);
-  EXPECT_TRUE(a.single_view);
-  EXPECT_EQ(a.T_scene_model, b.T_scene_model);
 }
 
 // --- Scale from the data ---------------------------------------------------------------

@@ -766,7 +766,7 @@ def setting_values(name: str, default: Any) -> st.SearchStrategy[Any]:
         )
     if isinstance(default, np.ndarray) and default.shape == (4, 4):
         return transforms()
-    if isinstance(default, np.ndarray) or name in ("scene_viewpoint", "current_viewpoint"):
+    if isinstance(default, np.ndarray):
         return st.one_of(vectors, st.none())
     if isinstance(default, dict):
         return st.sampled_from([{}, {"threads": 2}, {"threads": 10**6}, {"nope": 1}, {"_x": 1}])
@@ -1227,7 +1227,7 @@ def _phase_correlation_class(probe: Probe, data: Any) -> None:
     if data.draw(st.booleans()):
         probe("PhaseCorrelation.estimate", pc.estimate, data.draw(grids()), max_shift)
     else:
-        probe("PhaseCorrelation.estimate", pc.estimate, F.grid_b, max_shift=max_shift)
+        probe("PhaseCorrelation.estimate", pc.estimate, F.grid_b, max_shift_voxels=max_shift)
 
 
 @entry("egi")
@@ -2132,14 +2132,7 @@ def _produce_organized() -> Any:
 
 def _produce_translation() -> Any:
     F = fixtures()
-    estimate = svs.phase_correlation(F.grid_a, F.grid_b)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        _shift, _peak = estimate  # the deprecated tuple
-        _ = estimate[0], estimate[1]
-        with contextlib.suppress(IndexError):
-            _ = estimate[2**31 - 1]
-    return estimate
+    return svs.phase_correlation(F.grid_a, F.grid_b)
 
 
 def _register_result_types() -> None:

@@ -451,27 +451,16 @@ def test_icp_refinement_tightens_the_spectral_result():
     assert with_icp[0] < without[0] and with_icp[1] < without[1]
 
 
-def test_deprecated_viewpoints_warn_and_stand_for_sensor_origin():
-    """align(viewpoint=p) is sensor_origin=p; scene_viewpoint=p is sensor_origin=p with
-    scene_view='single_view': the same poses, each with a DeprecationWarning."""
+def test_the_viewpoint_aliases_removed_in_0_3_are_refused_by_name():
+    """align(viewpoint=...) and scene_viewpoint (0.2's aliases of sensor_origin) are gone:
+    a TypeError names the keyword and the setting to use."""
     rng = np.random.default_rng(7)
     model, scene, _, _ = make_case(rng, 30)
-    common = {"hypotheses": 4, "refinements": 1, "max_iterations": 5}
-    origin = (0.0, 0.0, 1.5)
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        old = svs.align(model, scene, scene_viewpoint=origin, **common)
-    new = svs.align(model, scene, sensor_origin=origin, scene_view="single_view", **common)
-    np.testing.assert_array_equal(old.T_scene_model, new.T_scene_model)
-    assert old.single_view and new.single_view
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        old = svs.align(model, scene, viewpoint=origin, **common)
-    new = svs.align(model, scene, sensor_origin=origin, **common)
-    np.testing.assert_array_equal(old.T_scene_model, new.T_scene_model)
-    params = svs.AlignParams()
-    with pytest.warns(DeprecationWarning):
-        params.scene_viewpoint = origin
-    assert params.scene_view == "single_view"
-    np.testing.assert_array_equal(params.sensor_origin, origin)
+    for keyword in ("viewpoint", "scene_viewpoint"):
+        with pytest.raises(TypeError, match=f"{keyword}.*sensor_origin"):
+            svs.align(model, scene, **{keyword: (0.0, 0.0, 1.5)})
+    with pytest.raises(AttributeError):
+        svs.AlignParams().scene_viewpoint = (0.0, 0.0, 1.5)
 
 
 def test_camera_frame_views_are_single_views_and_full_models_are_not():

@@ -146,15 +146,13 @@ def test_align_json_reports_the_confidence_inliers_and_the_voxel_used(case, caps
         assert np.array(alternative["T_scene_model"]).shape == (4, 4)
 
 
-def test_viewpoint_is_a_deprecated_alias_of_sensor_origin(case, capsys):
+def test_the_viewpoint_option_removed_in_0_3_is_refused(case, capsys):
+    # --viewpoint was 0.2's alias of --sensor-origin: bad input now, exit code 2.
     arguments = ("align", case["model"], case["scene"], "--voxel-size", "0.008", "--json")
-    code, out, err = run(capsys, *arguments, "--viewpoint", "0", "0", "1")
-    assert code == 0
-    assert "--viewpoint is deprecated: use --sensor-origin" in err
-    code, out_new, err_new = run(capsys, *arguments, "--sensor-origin", "0", "0", "1")
-    assert code == 0 and err_new == ""
-    old, new = json.loads(out), json.loads(out_new)
-    assert old["T_scene_model"] == new["T_scene_model"]
+    with pytest.raises(SystemExit) as exit_info:
+        run(capsys, *arguments, "--viewpoint", "0", "0", "1")
+    assert exit_info.value.code == 2
+    assert "--viewpoint" in capsys.readouterr().err
 
 
 def test_align_quiet_prints_no_progress(case, capsys):

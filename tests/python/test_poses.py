@@ -1,6 +1,6 @@
 """Units in Python: one pose distance (metres, radians, with mm and degree views) and the
-phase correlation's shift in metres, against closed forms; the old names still work, with
-a DeprecationWarning."""
+phase correlation's shift in metres, against closed forms; the names 0.3 removed are
+refused."""
 
 from __future__ import annotations
 
@@ -153,11 +153,10 @@ def test_the_servo_and_the_plots_use_the_one_function():
     assert servo.pose_error is svs.pose_error
     T_true = pose([0.1, 0.2, 0.3], [0.1, 0.2, 0.3])
     T_estimate = T_true @ pose([0.0, math.radians(3.0), 0.0], [0.002, 0.0, 0.0])
-    with pytest.warns(DeprecationWarning, match=r"spectral_vs\.pose_error"):
-        rotation_deg, translation_mm = plotting.pose_errors(T_estimate, T_true)
+    assert not hasattr(plotting, "pose_errors")  # 0.2's (degrees, mm) helper, removed in 0.3
     error = svs.pose_error(T_estimate, T_true)
-    assert (rotation_deg, translation_mm) == (error.rotation_deg, error.translation_mm)
-    assert rotation_deg == pytest.approx(3.0, abs=1e-9) and translation_mm == pytest.approx(2.0)
+    assert error.rotation_deg == pytest.approx(3.0, abs=1e-9)
+    assert error.translation_mm == pytest.approx(2.0)
 
 
 def test_phase_correlation_gives_metres_and_names_voxels():
@@ -178,14 +177,16 @@ def test_phase_correlation_gives_metres_and_names_voxels():
     np.testing.assert_array_equal(correlation.estimate(svs.voxelize(a, spec)).shift, estimate.shift)
 
 
-def test_the_old_tuple_of_phase_correlation_still_unpacks_with_a_warning():
+def test_phase_correlation_is_no_longer_the_tuple_of_0_1():
+    # Unpacking it as (shift in voxels, peak) warned in 0.2 and is gone in 0.3.
     a = np.zeros((8, 8, 8))
     a[2:4, 2:5, 3:6] = 1.0
     b = np.roll(a, (1, 2, -1), axis=(0, 1, 2))
-    with pytest.warns(DeprecationWarning, match="unpacking or indexing"):
-        shift, peak = svs.phase_correlation(a, b, subvoxel=False)
-    np.testing.assert_array_equal(shift, [1, 2, -1])  # voxels, as before
-    assert peak == pytest.approx(1.0, abs=1e-6)
-    with pytest.warns(DeprecationWarning):
-        assert svs.phase_correlation(a, b, subvoxel=False)[1] == pytest.approx(1.0, abs=1e-6)
+    estimate = svs.phase_correlation(a, b, subvoxel=False)
+    with pytest.raises(TypeError):
+        _shift, _peak = estimate
+    with pytest.raises(TypeError):
+        estimate[1]
+    np.testing.assert_array_equal(estimate.shift_voxels, [1, 2, -1])
+    assert estimate.peak == pytest.approx(1.0, abs=1e-6)
     assert svs.translation_cost(a, b, shift_voxels=(1, 2, -1)) == 0.0

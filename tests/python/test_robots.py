@@ -12,8 +12,12 @@ import pytest
 
 pybullet = pytest.importorskip("pybullet")
 
+from spectral_vs import (  # noqa: E402
+    experiment,
+    field_of_view,
+    sim,
+)
 from spectral_vs import servo as servo_lib  # noqa: E402
-from spectral_vs import sim  # noqa: E402
 from spectral_vs.sim.camera import view_matrix  # noqa: E402
 
 SMALL = sim.CameraIntrinsics(width=160, height=120)
@@ -137,8 +141,8 @@ def test_moderate_and_large_starts_are_unchanged():
     """The first starts of seed 0 as they were before the extreme set and the start check
     were added (iiwa, measured at commit b966e7a)."""
     with sim.PyBulletRobot(sim.SimParams(scene=sim.TableSceneParams(object_count=0))) as robot:
-        moderate = servo_lib.start_poses(robot.kinematics, "moderate", 2)
-        large = servo_lib.start_poses(robot.kinematics, "large", 2, q_reference=sim.HOME_Q)
+        moderate = experiment.start_poses(robot.kinematics, "moderate", 2)
+        large = experiment.start_poses(robot.kinematics, "large", 2, q_reference=sim.HOME_Q)
     got = [(1000 * t, math.degrees(r)) for _, t, r in (*moderate, *large)]
     expected = [(140.885, 26.557), (169.032, 20.742), (443.345, 30.424), (286.273, 47.851)]
     np.testing.assert_allclose(got, expected, atol=1e-3)
@@ -155,10 +159,10 @@ def test_view_share_counts_points_in_front_and_inside_the_image():
             [0.0, 0.0, 5.0],  # beyond far
         ]
     )
-    share = servo_lib.view_share(points, np.eye(4), K, (100, 80), depth_range=(0.1, 3.0))
+    share = field_of_view.view_share(points, np.eye(4), K, (100, 80), depth_range=(0.1, 3.0))
     assert share == pytest.approx(2 / 5)
     turned = np.diag([1.0, -1.0, -1.0, 1.0])  # half a turn about x: only the one behind
-    assert servo_lib.view_share(points, turned, K, (100, 80)) == pytest.approx(1 / 5)
+    assert field_of_view.view_share(points, turned, K, (100, 80)) == pytest.approx(1 / 5)
 
 
 def test_view_check_rejects_a_camera_under_the_table_and_a_lost_view():
@@ -179,7 +183,7 @@ def test_view_check_rejects_a_camera_under_the_table_and_a_lost_view():
     reference = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, 0.55)])
     K = np.array([[200.0, 0.0, 160.0], [0.0, 200.0, 120.0], [0.0, 0.0, 1.0]])
     home = np.array([0.6, 0.0, 0.55, 0.0])
-    check = servo_lib.ViewCheck(FreeCamera(), home, reference, K, (320, 240), min_share=0.3)
+    check = field_of_view.ViewCheck(FreeCamera(), home, reference, K, (320, 240), min_share=0.3)
     assert check.share(home) == pytest.approx(1.0) and check(home)
     low = np.array([0.6, 0.0, 0.04, 0.0])
     assert check.share(low) == pytest.approx(1.0)  # the whole patch in view ...
@@ -188,7 +192,7 @@ def test_view_check_rejects_a_camera_under_the_table_and_a_lost_view():
     turned = np.array([0.6, 0.0, 0.55, math.radians(40)])
     assert check.share(turned) < 0.3 and not check(turned)
     with pytest.raises(ValueError, match="min_share"):
-        servo_lib.ViewCheck(FreeCamera(), home, reference, K, (320, 240), min_share=0.0)
+        field_of_view.ViewCheck(FreeCamera(), home, reference, K, (320, 240), min_share=0.0)
 
 
 def _share_from_pybullet(robot, reference_world: np.ndarray) -> float:
@@ -215,10 +219,10 @@ def test_extreme_starts_are_in_range_and_keep_the_reference_in_view(name):
     with sim.PyBulletRobot(params) as robot:
         home = params.robot.home_q
         with pytest.raises(ValueError, match="accept must be given"):
-            servo_lib.start_poses(robot.kinematics, "extreme", 1, q_reference=home)
+            experiment.start_poses(robot.kinematics, "extreme", 1, q_reference=home)
         check = robot.view_check()
-        four = servo_lib.start_poses(robot.kinematics, "extreme", 4, 5, home, accept=check)
-        two = servo_lib.start_poses(robot.kinematics, "extreme", 2, 5, home, accept=check)
+        four = experiment.start_poses(robot.kinematics, "extreme", 4, 5, home, accept=check)
+        two = experiment.start_poses(robot.kinematics, "extreme", 2, 5, home, accept=check)
         # The reference in the world: the home depth image through PyBullet's camera pose.
         robot.reset_joint_positions(home)
         T_home = robot.camera_pose()
@@ -246,7 +250,7 @@ def test_cli_choices_are_the_presets_and_the_sets():
     servo = commands.choices["servo-sim"]
     choices = {a.dest: a.choices for a in servo._actions if a.choices}
     assert choices["robot"] == sorted(sim.ROBOT_MODELS)
-    assert choices["set"] == list(servo_lib.START_SETS)
+    assert choices["set"] == list(experiment.START_SETS)
 
 
 def test_servo_sim_runs_the_panda_and_names_it(capfd, tmp_path):
@@ -260,7 +264,7 @@ def test_servo_sim_runs_the_panda_and_names_it(capfd, tmp_path):
     with sim.PyBulletRobot(
         sim.SimParams(robot=sim.robot_model("panda"), scene=sim.TableSceneParams(object_count=0))
     ) as robot:
-        ((_, t, r),) = servo_lib.start_poses(
+        ((_, t, r),) = experiment.start_poses(
             robot.kinematics, "moderate", 1, q_reference=sim.PANDA_HOME_Q
         )
     (run,) = summary["starts"]
@@ -277,7 +281,7 @@ def test_panda_servo_reaches_the_reference_from_a_moderate_start():
     with sim.PyBulletRobot(params) as robot:
         reference = robot.capture()
         T_world_reference = robot.camera_pose()
-        ((q, t, _),) = servo_lib.start_poses(
+        ((q, t, _),) = experiment.start_poses(
             robot.kinematics, "moderate", 1, q_reference=sim.PANDA_HOME_Q
         )
         robot.reset_joint_positions(q)

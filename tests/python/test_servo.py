@@ -610,12 +610,11 @@ def test_servo_sim_command_prints_steps_and_the_final_error(capsys, tmp_path):
 
 
 def test_servo_sim_json_reports_every_start(capfd, tmp_path):
-    """--starts N --json: one entry per start, the starts of servo.start_poses, errors in
+    """--starts N --json: one entry per start, the starts of experiment.start_poses, errors in
     mm and degrees measured by the simulation. Standard output, read at the file
     descriptor (PyBullet's C code prints there), holds the JSON alone."""
     pytest.importorskip("pybullet")
-    from spectral_vs import servo as servo_lib
-    from spectral_vs import sim
+    from spectral_vs import experiment, sim
     from spectral_vs.cli import main
 
     argv = ["servo-sim", "--starts", "2", "--seed", "4", "--set", "large", "--max-steps", "2"]
@@ -624,7 +623,7 @@ def test_servo_sim_json_reports_every_start(capfd, tmp_path):
     assert code == 1  # two steps do not converge
     assert summary["set"] == "large" and summary["successes"] == 0
     with sim.PyBulletRobot(sim.SimParams()) as robot:
-        expected = servo_lib.start_poses(robot.kinematics, "large", 2, seed=4)
+        expected = experiment.start_poses(robot.kinematics, "large", 2, seed=4)
     assert [run["index"] for run in summary["starts"]] == [0, 1]
     for run, (_, t, r) in zip(summary["starts"], expected, strict=True):
         assert run["start_mm"] == pytest.approx(1000 * t, abs=1e-6)
@@ -663,15 +662,14 @@ def test_servo_sim_quiet_prints_one_line_per_start_and_the_total(capfd, tmp_path
 def test_start_poses_are_seeded_and_prefix_stable():
     """The first k of n starts are the k starts of a shorter request; seeds differ."""
     pytest.importorskip("pybullet")
-    from spectral_vs import servo as servo_lib
-    from spectral_vs import sim
+    from spectral_vs import experiment, sim
 
     with sim.PyBulletRobot(sim.SimParams()) as robot:
-        five = servo_lib.start_poses(robot.kinematics, "moderate", 5, seed=1)
-        two = servo_lib.start_poses(robot.kinematics, "moderate", 2, seed=1)
-        other = servo_lib.start_poses(robot.kinematics, "moderate", 2, seed=2)
+        five = experiment.start_poses(robot.kinematics, "moderate", 5, seed=1)
+        two = experiment.start_poses(robot.kinematics, "moderate", 2, seed=1)
+        other = experiment.start_poses(robot.kinematics, "moderate", 2, seed=2)
         with pytest.raises(ValueError, match="set_name"):
-            servo_lib.start_poses(robot.kinematics, "huge", 1)
+            experiment.start_poses(robot.kinematics, "huge", 1)
     for (q5, t5, _), (q2, t2, _) in zip(five[:2], two, strict=True):
         assert np.array_equal(q5, q2) and t5 == t2
     assert not np.array_equal(two[0][0], other[0][0])

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from spectral_vs import PointCloud
+from spectral_vs.experiment import start_poses
 from spectral_vs.servo import (
     REASONS,
     ServoParams,
@@ -19,7 +20,6 @@ from spectral_vs.servo import (
     pose_error,
     rotation_matrix,
     run_servo,
-    start_poses,
 )
 
 

@@ -9,6 +9,7 @@ import itertools
 import numpy as np
 import pytest
 
+from spectral_vs.experiment import start_poses
 from spectral_vs.servo import (
     ServoParams,
     SpectralServo,
@@ -16,7 +17,6 @@ from spectral_vs.servo import (
     field_share,
     pose_error,
     run_servo,
-    start_poses,
 )
 from spectral_vs.servo.arrival import ArrivalCheck
 from spectral_vs.servo.estimate import TrackedEstimate

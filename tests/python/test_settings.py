@@ -145,15 +145,13 @@ def test_servo_params_take_every_field_and_show_it():
         svs.ServoParams(colour=1)
 
 
-def test_a_deprecated_alias_is_a_keyword_but_not_a_field_of_the_repr():
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        params = svs.AlignParams(scene_viewpoint=(0.1, 0.0, 0.0))
-    np.testing.assert_allclose(params.sensor_origin, [0.1, 0.0, 0.0])
-    assert params.scene_view == "single_view"
-    text = repr(params)
-    assert "scene_viewpoint" not in text
-    assert "sensor_origin=[0.1, 0.0, 0.0]," in text and "scene_view='single_view'," in text
-    assert eval(text, {"AlignParams": svs.AlignParams}) == params
+def test_the_alias_removed_in_0_3_is_no_keyword_and_no_field():
+    with pytest.raises(TypeError, match="scene_viewpoint"):
+        svs.AlignParams(scene_viewpoint=(0.1, 0.0, 0.0))
+    with pytest.raises(AttributeError):
+        svs.SceneParams().scene_viewpoint = (0.1, 0.0, 0.0)
+    with pytest.raises(TypeError, match="current_viewpoint"):
+        svs.ViewAlignParams(current_viewpoint=(0.1, 0.0, 0.0))
 
 
 GROUPS = {
@@ -209,14 +207,6 @@ def test_a_group_is_a_keyword_and_can_be_assigned_as_a_copy():
         svs.AlignParams(search=svs.LocalParams())
     with pytest.raises(TypeError, match="'search'"):
         svs.align(np.zeros((3, 3)), np.zeros((3, 3)), search=1)
-
-
-def test_the_deprecated_alias_works_in_its_group_too():
-    scene = svs.SceneParams()
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        scene.scene_viewpoint = (0.1, 0.0, 0.0)
-    assert scene.scene_view == "single_view"
-    assert "scene_viewpoint" not in repr(scene)
 
 
 def test_servo_params_groups_and_flat_names_are_one_setting():

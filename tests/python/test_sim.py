@@ -286,8 +286,6 @@ def test_default_scene_puts_clutter_in_view_of_the_home_pose():
         assert np.all(world[:, 2] > -1e-3)  # only table and objects: no floor, no robot
 
 
-def test_the_old_table_settings_name_warns_and_is_the_new_class():
-    with pytest.warns(DeprecationWarning, match="TableSceneParams"):
-        old = sim.SceneParams
-    assert old is sim.TableSceneParams
+def test_the_table_settings_are_not_the_aligners_scene_settings():
+    assert not hasattr(sim, "SceneParams")  # 0.2's name of TableSceneParams, removed in 0.3
     assert sim.TableSceneParams is not svs.SceneParams  # the aligner's scene settings

@@ -97,12 +97,8 @@ def test_max_shift_bounds_the_search():
     assert np.allclose(free.shift_voxels, [6, 0, 0], atol=0.5)
     assert np.all(np.abs(bounded.peak_voxels) <= 3)
     np.testing.assert_array_equal(wide.shift_voxels, free.shift_voxels)
-    # The old name, in voxels as the new one says: the same bound, with a warning.
-    with pytest.warns(DeprecationWarning, match="max_shift_voxels"):
-        old = correlation.estimate(moving, max_shift=(3, 3, 3))
-    np.testing.assert_array_equal(old.peak_voxels, bounded.peak_voxels)
-    with pytest.raises(TypeError, match="max_shift and max_shift_voxels"):
-        correlation.estimate(moving, max_shift_voxels=(3, 3, 3), max_shift=(3, 3, 3))
+    with pytest.raises(TypeError):  # 0.2's max_shift, removed in 0.3
+        correlation.estimate(moving, max_shift=(3, 3, 3))
     with pytest.raises(ValueError, match="max_shift_voxels must be >= 0"):
         correlation.estimate(moving, max_shift_voxels=(3, -1, 3))
 

@@ -167,29 +167,23 @@ def test_a_prior_that_is_not_rigid_names_the_argument(table_pairs):
         svs.align_views(pair.reference, pair.current, prior=np.eye(3))
 
 
-def test_the_sensor_is_named_as_in_align_and_the_old_names_still_work(table_pairs):
-    """align_views(sensor_origin=p) as align() names it; current_viewpoint and
-    reference_viewpoint are deprecated aliases: the same pose, with a warning."""
+def test_the_sensor_is_named_as_in_align_and_the_old_names_are_refused(table_pairs):
+    """align_views(sensor_origin=p) as align() names it; the settings' origin is used as
+    given; current_viewpoint and reference_viewpoint (0.2's aliases) are refused by name."""
     pair = table_pairs[2]
     origin = pair.current_viewpoint
     new = svs.align_views(pair.reference, pair.current, sensor_origin=origin)
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        old = svs.align_views(pair.reference, pair.current, current_viewpoint=origin)
-    np.testing.assert_array_equal(old.T_current_reference, new.T_current_reference)
-    with pytest.warns(DeprecationWarning, match="reference_sensor_origin"):
-        svs.align_views(
-            pair.reference, pair.current, sensor_origin=origin, reference_viewpoint=(0, 0, 0)
-        )
-    # The origin in the settings is used as given (it is no longer overwritten by a
-    # keyword's default): the same pose as the keyword.
     params = svs.ViewAlignParams(sensor_origin=origin)
     given = svs.align_views(pair.reference, pair.current, params)
     np.testing.assert_array_equal(given.T_current_reference, new.T_current_reference)
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        aliased = svs.ViewAlignParams(current_viewpoint=origin)
-    assert aliased == params
-    with pytest.warns(DeprecationWarning, match="sensor_origin"):
-        np.testing.assert_array_equal(aliased.current_viewpoint, origin)
+    for keyword, instead in (
+        ("current_viewpoint", "sensor_origin"),
+        ("reference_viewpoint", "reference_sensor_origin"),
+    ):
+        with pytest.raises(TypeError, match=f"{keyword}.*removed in 0.3: use {instead}"):
+            svs.align_views(pair.reference, pair.current, **{keyword: origin})
+    with pytest.raises(AttributeError):
+        params.current_viewpoint = origin
 
 
 def test_the_window_search_finds_a_view_the_search_misses():

@@ -18,8 +18,8 @@ void check_align_params(const AlignParams& params);
 std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
                                                   std::chrono::steady_clock::time_point start);
 
-/// The sensor origin of a scene declared a single view (scene_view = single_view, or the
-/// deprecated scene_viewpoint); none otherwise.
+/// The sensor origin of a scene declared a single view (scene_view = single_view); none
+/// otherwise.
 std::optional<Eigen::Vector3d> declared_viewpoint(const AlignParams& params);
 
 /// Wall-clock seconds from `start` to now.

@@ -19,7 +19,6 @@ void check(const SceneParams& p) {
     fail("bandwidth must be in [2, ", kMaxAlignBandwidth, "], got ", p.bandwidth);
   }
   if (!p.sensor_origin.allFinite()) fail("sensor_origin must be finite");
-  if (p.scene_viewpoint && !p.scene_viewpoint->allFinite()) fail("scene_viewpoint must be finite");
 }
 
 void check(const LocalParams& p) {

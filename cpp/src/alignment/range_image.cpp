@@ -44,7 +44,7 @@ RangeImage::RangeImage(const PointCloud& cloud, const Eigen::Vector3d& viewpoint
   const Points& scene = cloud.points();
   const Eigen::Vector3d centroid = scene.colwise().mean().transpose();
   if ((centroid - viewpoint).norm() < 1e-9)
-    fail("scene_viewpoint: the viewpoint is at the scene's centroid");
+    fail("sensor_origin: the sensor is at the scene's centroid");
   R_camera_scene_ = look_at(viewpoint, centroid);
   std::vector<double> depths;
   double lo[2] = {kMaxSlope, kMaxSlope}, hi[2] = {-kMaxSlope, -kMaxSlope};
@@ -58,7 +58,7 @@ RangeImage::RangeImage(const PointCloud& cloud, const Eigen::Vector3d& viewpoint
       hi[a] = std::max(hi[a], c[a] / c.z());
     }
   }
-  if (depths.empty()) fail("scene_viewpoint: no scene point is in front of the viewpoint");
+  if (depths.empty()) fail("sensor_origin: no scene point is in front of the sensor");
   std::nth_element(depths.begin(), depths.begin() + std::ptrdiff_t(depths.size() / 2),
                    depths.end());
   angle_ = pixel_size / depths[depths.size() / 2];

@@ -120,7 +120,6 @@ struct SceneSensor {
 };
 
 SceneSensor scene_sensor(const AlignParams& params) {
-  if (params.scene.scene_viewpoint) return {*params.scene.scene_viewpoint, SceneView::single_view};
   return {params.scene.sensor_origin, params.scene.scene_view};
 }
 

@@ -45,8 +45,7 @@ void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
 std::optional<Eigen::Vector3d> single_view_origin(const PointCloud& scene,
                                                   const AlignParams& params);
 
-/// The sensor origin of the scene as the settings give it (sensor_origin, or the
-/// deprecated scene_viewpoint).
+/// The sensor origin of the scene as the settings give it (sensor_origin).
 Eigen::Vector3d scene_sensor_origin(const AlignParams& params);
 
 }  // namespace spectral_vs::detail

@@ -166,13 +166,6 @@ def _add_start_settings(settings: Any) -> None:
         "the scene's sensor: estimated normals face it and a single view is detected from it",
     )
     settings.add_argument(
-        "--viewpoint",
-        type=float,
-        nargs=3,
-        metavar=("X", "Y", "Z"),
-        help="deprecated alias of --sensor-origin",
-    )
-    settings.add_argument(
         "--scene-view",
         choices=("auto", "single_view", "all_sides"),
         default="auto",

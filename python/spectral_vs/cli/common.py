@@ -242,15 +242,7 @@ def add_sensor_origin(group: Any, role: str, flag: str = "--sensor-origin") -> N
 
 
 def sensor_origin_of(args: argparse.Namespace) -> tuple[float, float, float]:
-    """--sensor-origin, or the deprecated --viewpoint (with a warning on stderr)."""
-    if getattr(args, "viewpoint", None) is not None:
-        print(
-            "warning: --viewpoint is deprecated: use --sensor-origin (it also sets where a "
-            "single view is seen from)",
-            file=sys.stderr,
-        )
-        if args.sensor_origin is None:
-            return tuple(args.viewpoint)
+    """--sensor-origin, the origin by default."""
     return tuple(args.sensor_origin) if args.sensor_origin is not None else (0.0, 0.0, 0.0)
 
 

@@ -8,7 +8,7 @@ display and leaves the caller's matplotlib backend alone.
 
 from spectral_vs.plotting._common import _new_figure  # noqa: F401  (the CLI and benchmarks draw with it)
 from spectral_vs.plotting.alignment import render_alignment
-from spectral_vs.plotting.convergence import plot_convergence, pose_errors
+from spectral_vs.plotting.convergence import plot_convergence
 from spectral_vs.plotting.servo import plot_servo
 
-__all__ = ["plot_convergence", "plot_servo", "pose_errors", "render_alignment"]
+__all__ = ["plot_convergence", "plot_servo", "render_alignment"]

@@ -4,7 +4,6 @@ Fig. 3 and 5)."""
 from __future__ import annotations
 
 import os
-import warnings
 from typing import Any
 
 import numpy as np
@@ -15,26 +14,6 @@ from spectral_vs.plotting._common import (
     _set_scale,
 )
 from spectral_vs.poses import pose_error
-
-
-def pose_errors(
-    T_estimate: np.ndarray, T_true: np.ndarray, center: np.ndarray | None = None
-) -> tuple[float, float]:
-    """Deprecated (removed in 0.3): ``(rotation_deg, translation_mm)`` of an estimated pose.
-
-    Use :func:`spectral_vs.pose_error`, which returns ``(translation_m, rotation_rad)``
-    with ``.rotation_deg`` and ``.translation_mm``: this is
-    ``e = pose_error(T_estimate, T_true, center=center); (e.rotation_deg, e.translation_mm)``.
-    """
-    warnings.warn(
-        "spectral_vs.plotting.pose_errors is deprecated and will be removed in 0.3: use "
-        "spectral_vs.pose_error(T_estimate, T_true, center=center), which returns "
-        "(translation_m, rotation_rad) with .rotation_deg and .translation_mm",
-        DeprecationWarning,
-        stacklevel=2,
-    )
-    error = pose_error(T_estimate, T_true, center=center)
-    return error.rotation_deg, error.translation_mm
 
 
 def _series(history: list[Any], name: str) -> np.ndarray:

@@ -53,14 +53,10 @@ The package, one module a job:
   :class:`ServoLog`, :data:`REASONS`, :data:`HOLDS`.
 
 The experiment's harness (start poses, the start check, recording) is
-:mod:`spectral_vs.experiment`, and the figure of a run :func:`spectral_vs.plotting.plot_servo`;
-their names are also read from here, as before.
+:mod:`spectral_vs.experiment`, and the figure of a run :func:`spectral_vs.plotting.plot_servo`.
 """
 
 from __future__ import annotations
-
-import importlib
-from typing import Any
 
 from spectral_vs._core import field_share
 from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
@@ -88,33 +84,9 @@ from spectral_vs.servo.stage_settings import (
     WatchdogParams,
 )
 
-#: Names kept here for the code written before the package: where they live now.
-_MOVED = {
-    "START_SETS": "spectral_vs.experiment",
-    "CloudRecorder": "spectral_vs.experiment",
-    "ViewCheck": "spectral_vs.field_of_view",
-    "random_start": "spectral_vs.experiment",
-    "record_dict": "spectral_vs.experiment",
-    "start_poses": "spectral_vs.experiment",
-    "true_errors": "spectral_vs.experiment",
-    "view_share": "spectral_vs.field_of_view",
-    "plot_servo": "spectral_vs.plotting",
-}
-
-
-def __getattr__(name: str) -> Any:
-    """The harness's and the figure's names, imported when first read (the servo itself
-    does not depend on them)."""
-    if name in _MOVED:
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 __all__ = [
     "HOLDS",
     "REASONS",
-    "START_SETS",
-    "CloudRecorder",
     "FaultParams",
     "LawParams",
     "PlaneTurnParams",
@@ -128,19 +100,12 @@ __all__ = [
     "ServoStatus",
     "SpectralServo",
     "StopParams",
-    "ViewCheck",
     "WatchdogParams",
     "dominant_normal",
     "dominant_plane",
     "field_share",
-    "plot_servo",
     "pose_error",
-    "random_start",
-    "record_dict",
     "rotation_matrix",
     "rotation_vector",
     "run_servo",
-    "start_poses",
-    "true_errors",
-    "view_share",
 ]

@@ -76,19 +76,3 @@ __all__ = [
     "render_depth",
     "robot_model",
 ]
-
-
-def __getattr__(name: str) -> object:
-    # The simulated table's settings were `SceneParams`, the name of the aligner's scene
-    # settings (`spectral_vs.SceneParams`): kept one release as a deprecated alias.
-    if name == "SceneParams":
-        import warnings
-
-        warnings.warn(
-            "spectral_vs.sim.SceneParams is deprecated: use spectral_vs.sim.TableSceneParams "
-            "(spectral_vs.SceneParams is the aligner's scene settings)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return TableSceneParams
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -58,10 +58,6 @@ struct SceneParams {
   /// from its flip; with global search and no support plane, the whole view is searched
   /// as one part (below). Default: detected (`detect_single_view`).
   SceneView scene_view = SceneView::automatic;
-  /// Deprecated, kept for one release (not marked [[deprecated]]: every copy of the
-  /// settings would warn): set means scene_view = single_view from this origin (metres),
-  /// overriding sensor_origin and scene_view.
-  std::optional<Eigen::Vector3d> scene_viewpoint;
   /// With global search: search the scene without its support plane (a plane of one
   /// normal direction wider than 4 model reaches holding over a fifth of the points, e.g.
   /// a table; fitness still sees it). Where there is one, the objects on it are searched
@@ -310,9 +306,9 @@ struct AlignResult {
   AlignStopReason stop_reason = AlignStopReason::max_iterations;  ///< Why it stopped.
   int iterations = 0;  ///< Iterations of that run: history.size().
   /// How well the scene supports the final pose, in [0, 1]: high for a correct alignment,
-  /// low for a wrong one. Without scene_viewpoint: the fraction of the model's occupied
+  /// low for a wrong one. For a scene seen from all sides: the fraction of the model's occupied
   /// voxels that lie within one voxel of scene points with a normal within about 50
-  /// degrees of the model's. With it: the model is rendered from the viewpoint (its
+  /// degrees of the model's. For a single view: the model is rendered from sensor_origin (its
   /// nearest points facing it, in pixels of half a voxel) and each pixel compared with the
   /// scan's depth there: confirmed (within one voxel, normals within 45 degrees),
   /// contradicted (the scan saw through it, or a surface turned another way) or hidden
