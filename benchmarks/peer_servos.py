@@ -45,7 +45,7 @@ from spectral_vs.servo.records import (
     _empty_record,
     _too_few_points,
 )
-from spectral_vs.servo.stage_settings import _check_positive
+from spectral_vs.servo.setting_checks import check_positive
 
 InteractionKind = Literal["current", "desired", "mean"]
 RegistrationMethod = Literal["icp", "fpfh"]
@@ -288,7 +288,7 @@ class DepthServoParams(_Law):
             raise ValueError(
                 f"interaction must be 'current', 'desired' or 'mean', got {self.interaction!r}"
             )
-        _check_positive(
+        check_positive(
             self,
             (
                 "lambda_t",
@@ -588,7 +588,7 @@ class RegistrationServoParams(_Law):
     def __post_init__(self) -> None:
         if self.method not in ("icp", "fpfh"):
             raise ValueError(f"method must be 'icp' or 'fpfh', got {self.method!r}")
-        _check_positive(
+        check_positive(
             self,
             (
                 "voxel_size",

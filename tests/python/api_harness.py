@@ -78,8 +78,8 @@ from test_properties import (  # noqa: E402
 from test_servo import FreeCamera, FreeCameraKinematics, camera_pose, table_top, view  # noqa: E402
 
 import spectral_vs as svs  # noqa: E402
+from spectral_vs.servo import fault_settings, stage_settings  # noqa: E402
 from spectral_vs.servo import records as servo_records  # noqa: E402
-from spectral_vs.servo import stage_settings as servo_stages  # noqa: E402
 
 #: What one call may take: seconds of wall time, megabytes of resident memory over what the
 #: process held before it (as in test_properties.py's harness of cloud_from_depth).
@@ -800,14 +800,14 @@ def overrides(draw: st.DrawFn, fields: dict[str, Any], at_most: int = 2) -> dict
 def servo_fields() -> dict[str, Any]:
     out: dict[str, Any] = {}
     for kind in (
-        servo_stages.RegistrationParams,
-        servo_stages.LawParams,
-        servo_stages.StopParams,
-        servo_stages.WatchdogParams,
-        servo_stages.FaultParams,
-        servo_stages.RelocalizationParams,
-        servo_stages.RecoveryParams,
-        servo_stages.PlaneTurnParams,
+        stage_settings.RegistrationParams,
+        stage_settings.LawParams,
+        stage_settings.StopParams,
+        stage_settings.WatchdogParams,
+        fault_settings.FaultParams,
+        fault_settings.RelocalizationParams,
+        fault_settings.RecoveryParams,
+        stage_settings.PlaneTurnParams,
     ):
         instance = kind()
         for item in dataclasses.fields(kind):
@@ -816,7 +816,7 @@ def servo_fields() -> dict[str, Any]:
 
 
 #: A table drawn from: every integer setting of the servo, by name, with its documented
-#: lower bound (the checks of spectral_vs.servo.stage_settings).
+#: lower bound (the checks of spectral_vs.servo.setting_checks).
 INT_BOUNDS.update(
     {
         "min_points": (1,),

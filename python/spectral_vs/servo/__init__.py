@@ -61,6 +61,7 @@ from __future__ import annotations
 from spectral_vs._core import field_share
 from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
 from spectral_vs.servo.controller import SpectralServo
+from spectral_vs.servo.fault_settings import FaultParams, RecoveryParams, RelocalizationParams
 from spectral_vs.servo.loop import run_servo
 from spectral_vs.servo.plane_turn import dominant_normal, dominant_plane
 from spectral_vs.servo.records import (
@@ -74,12 +75,9 @@ from spectral_vs.servo.records import (
 from spectral_vs.servo.scale import ServoScale
 from spectral_vs.servo.settings import ServoParams
 from spectral_vs.servo.stage_settings import (
-    FaultParams,
     LawParams,
     PlaneTurnParams,
-    RecoveryParams,
     RegistrationParams,
-    RelocalizationParams,
     StopParams,
     WatchdogParams,
 )

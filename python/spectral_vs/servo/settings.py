@@ -1,6 +1,7 @@
 """Settings of the servo (:class:`ServoParams`), grouped by the stage they set: the
 registration, the control law, the stop rule, the watchdog, the sensor faults, the
-relocalization, the recovery and the plane turn (:mod:`spectral_vs.servo.stage_settings`).
+relocalization, the recovery and the plane turn (:mod:`spectral_vs.servo.stage_settings`,
+:mod:`spectral_vs.servo.fault_settings`).
 Every setting is also a keyword and an attribute of :class:`ServoParams` itself
 (``ServoParams(max_outage=0.3)``, ``params.max_outage``)."""
 
@@ -15,16 +16,14 @@ from typing import Any
 import numpy as np
 
 from spectral_vs._core import AlignParams
+from spectral_vs.servo.fault_settings import FaultParams, RecoveryParams, RelocalizationParams
+from spectral_vs.servo.setting_checks import check_keys
 from spectral_vs.servo.stage_settings import (
-    FaultParams,
     LawParams,
     PlaneTurnParams,
-    RecoveryParams,
     RegistrationParams,
-    RelocalizationParams,
     StopParams,
     WatchdogParams,
-    _check_keys,
 )
 
 #: The groups of :class:`ServoParams`: attribute name and settings type.
@@ -175,6 +174,6 @@ class ServoParams:
                 self.registration.max_iterations
             )  # the global search's runs
         for name, value in self.registration.align_overrides.items():
-            _check_keys({name: value}, "align_overrides", AlignParams)
+            check_keys({name: value}, "align_overrides", AlignParams)
             setattr(params, name, value)
         return params
