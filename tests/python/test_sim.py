@@ -11,6 +11,7 @@ import spectral_vs as svs
 
 pybullet = pytest.importorskip("pybullet")
 from pybullet_utils.bullet_client import BulletClient  # noqa: E402
+from reference_normals import organized_normals  # noqa: E402
 
 from spectral_vs import sim  # noqa: E402
 
@@ -199,7 +200,7 @@ def test_depth_to_cloud_is_the_numpy_reference(stride):
     params = sim.NormalParams(stride=stride)
     cloud = sim.depth_to_cloud(depth, SMALL, params)
     points = sim.back_project(depth, SMALL)
-    normals = sim.organized_normals(points, params, np.float64)
+    normals = organized_normals(points, params, np.float64)
     points = points[::stride, ::stride].reshape(-1, 3)
     normals = normals[::stride, ::stride].reshape(-1, 3)
     keep = np.isfinite(normals[:, 0])
@@ -208,7 +209,7 @@ def test_depth_to_cloud_is_the_numpy_reference(stride):
     np.testing.assert_allclose(cloud.points, points[keep], rtol=0, atol=1e-12)
     np.testing.assert_allclose(cloud.normals, normals[keep], rtol=0, atol=1e-6)
     # The float32 default of the reference is within 1e-4 of it.
-    single = sim.organized_normals(sim.back_project(depth, SMALL), params)
+    single = organized_normals(sim.back_project(depth, SMALL), params)
     single = single[::stride, ::stride].reshape(-1, 3)[keep]
     np.testing.assert_allclose(cloud.normals, single, rtol=0, atol=1e-4)
 

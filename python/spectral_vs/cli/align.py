@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -12,12 +11,12 @@ from typing import Any
 import numpy as np
 
 import spectral_vs as svs
+from spectral_vs.cli.align_output import json_report, print_result
 from spectral_vs.cli.common import (
     CLOUD_SUFFIXES,
     Progress,
     _check_output,
     _count,
-    _duration,
     _plotting,
     _positive_float,
     _positive_int,
@@ -27,15 +26,11 @@ from spectral_vs.cli.common import (
     add_save_aligned,
     add_sensor_origin,
     check_paths,
-    covariance_report,
-    describe_transform,
     ground_truth_errors,
     load_clouds,
-    print_errors,
     read_transform,
     save_moved,
     sensor_origin_of,
-    verdict_line,
 )
 from spectral_vs.registration import derived_voxel_size, prepare
 
@@ -245,11 +240,11 @@ def run_align(args: argparse.Namespace) -> int:
     _write_figures(args, progress, plotting, clouds, result, settings, truth, center)
 
     if args.json:
-        report = _report(result, settings, timings, (len(model), len(scene)), errors)
-        report["passed"] = passed
-        print(json.dumps(report, indent=2))
+        summary = json_report(result, settings, timings, (len(model), len(scene)), errors)
+        summary["passed"] = passed
+        print(json.dumps(summary, indent=2))
         return 0 if passed else 1
-    _print_result(args, result, timings, errors)
+    print_result(args, result, timings, errors)
     return 0 if passed else 1
 
 
@@ -317,87 +312,3 @@ def _write_figures(
                 initial_T=np.asarray(settings.initial_guess),
                 title=f"{args.model.name} onto {args.scene.name}",
             )
-
-
-def _report(
-    result: svs.AlignResult,
-    settings: svs.AlignParams,
-    timings: dict[str, float],
-    points: tuple[int, int],
-    errors: tuple[float, float] | None,
-) -> dict[str, Any]:
-    """The --json report, without "passed"; ``points``: of the model and the scene read."""
-    report: dict[str, Any] = {
-        "T_scene_model": np.asarray(result.T_scene_model).tolist(),
-        "converged": bool(result.converged),
-        "stop_reason": result.stop_reason,
-        "iterations": int(result.iterations),
-        "fitness": float(result.fitness),
-        "correlation": float(result.correlation),
-        "translation_peak": float(result.translation_peak),
-        "hypothesis": int(result.hypothesis),
-        "reliable": bool(result.reliable),
-        "status": result.status,
-        "confidence": float(result.confidence),
-        "score": float(result.score),
-        **covariance_report(result.covariance),
-        "inliers": int(result.inliers),
-        "inlier_fraction": float(result.inlier_fraction),
-        "inlier_rmse_mm": 1000 * float(result.inlier_rmse),
-        "inlier_distance_mm": 1000 * float(result.inlier_distance),
-        "ambiguous": bool(result.ambiguous),
-        "alternatives": [_alternative(a) for a in result.alternatives],
-        "single_view": bool(result.single_view),
-        "time_s": timings["align"],
-        "timings_s": timings,
-        "voxel_size_m": float(result.voxel_size),
-        "model_points": points[0],
-        "scene_points": points[1],
-    }
-    if errors is not None:
-        report["rotation_error_deg"] = errors[0]
-        report["translation_error_mm"] = errors[1]
-    return report
-
-
-def _alternative(alternative: svs.AlignAlternative) -> dict[str, Any]:
-    return {
-        "T_scene_model": np.asarray(alternative.T_scene_model).tolist(),
-        "confidence": float(alternative.confidence),
-        "score": float(alternative.score),
-        "inliers": int(alternative.inliers),
-        "inlier_rmse_mm": 1000 * float(alternative.inlier_rmse),
-        "rotation_apart_deg": math.degrees(alternative.rotation_apart),
-        "translation_apart_mm": 1000 * float(alternative.translation_apart),
-    }
-
-
-def _print_result(
-    args: argparse.Namespace,
-    result: svs.AlignResult,
-    timings: dict[str, float],
-    errors: tuple[float, float] | None,
-) -> None:
-    """The pose, the state and the errors, as text."""
-    T = np.asarray(result.T_scene_model)
-    with np.printoptions(precision=6, suppress=True):
-        print("T_scene_model (moves MODEL coordinates into the SCENE frame, metres):")
-        print(T)
-    print(describe_transform(T))
-    ending = "ended normally" if result.converged else f"stopped ({result.stop_reason})"
-    print(
-        f"search {ending}, {_count(result.iterations, 'iteration')} of Algorithm 1, fitness "
-        f"{result.fitness:.3f}, correlation {result.correlation:.3f}, "
-        f"{1000 * result.voxel_size:.3g} mm voxels, {_duration(timings['align'])}"
-    )
-    print(verdict_line(result))
-    deviations = covariance_report(result.covariance)
-    print(
-        f"{result.inliers} inliers within {1000 * result.inlier_distance:.3g} mm "
-        f"({100 * result.inlier_fraction:.0f}% of the model), RMSE "
-        f"{1000 * result.inlier_rmse:.2f} mm; standard deviation "
-        f"{max(deviations['rotation_std_deg']):.2g} deg, "
-        f"{max(deviations['translation_std_mm']):.2g} mm"
-        + (", single view" if result.single_view else "")
-    )
-    print_errors(args, errors, "the model centroid")

@@ -1,12 +1,15 @@
 """Data shared by the command line, the tests and the benchmarks.
 
 * :mod:`spectral_vs.data.view_pairs`: pairs of views of one scene, cut out of the real
-  organized scans or rendered in the simulation, with their true relative pose
-  (:mod:`spectral_vs.data.scan_windows`: the windows they are cut out of).
+  organized scans, with their true relative pose (:mod:`spectral_vs.data.scan_windows`:
+  the windows they are cut out of), or rendered in the simulation
+  (:mod:`spectral_vs.data.rendered_pairs`).
 * :mod:`spectral_vs.data.scenes`: seeded synthetic table-top scenes with exact normals,
   and the milk carton's scan split into a model and a scene that share no point.
 """
 
+from spectral_vs.data.rendered_pairs import sim_view_pairs
+from spectral_vs.data.scans import SCANS, data_dir, scan_path
 from spectral_vs.data.scenes import (
     MILK_MODEL,
     MILK_SCENE,
@@ -19,15 +22,11 @@ from spectral_vs.data.view_pairs import (
     NORMAL_NEIGHBORS,
     OVERLAP_RANGE,
     ROTATION_RANGE_DEG,
-    SCANS,
     WINDOW_SHARE,
     ViewPair,
-    data_dir,
     make_view_pair,
     random_transform,
     rotation_angle_deg,
-    scan_path,
-    sim_view_pairs,
     view_pairs,
 )
 

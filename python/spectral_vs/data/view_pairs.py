@@ -7,13 +7,13 @@ Two sources of :class:`ViewPair`:
   real organized scan (:func:`spectral_vs.load_organized`), keep disjoint pixels in the two
   (even ``u + v`` in the reference, odd in the current: no point is in both views) and move
   the current by a known, seeded rigid transform.
-* :func:`sim_view_pairs` renders the wrist camera of the simulated iiwa
-  (:mod:`spectral_vs.sim`) at its home pose (reference) and at seeded start poses
-  (current), with the simulation's camera poses as the ground truth.
+* :func:`~spectral_vs.data.rendered_pairs.sim_view_pairs` renders the wrist camera of the
+  simulated iiwa (:mod:`spectral_vs.sim`) at its home pose (reference) and at seeded
+  start poses (current), with the simulation's camera poses as the ground truth.
 
-The real scans are found in :func:`data_dir`: ``$SPECTRAL_VS_DATA``, else
-``../shared/data`` (relative to the working directory); :data:`SCANS` names the two used
-here.
+The real scans are found in :func:`~spectral_vs.data.scans.data_dir`:
+``$SPECTRAL_VS_DATA``, else ``../shared/data`` (relative to the working directory);
+:data:`~spectral_vs.data.scans.SCANS` names the two used here.
 
 Normals of the scan pairs are plane fits over the ``normal_neighbors`` nearest points of the
 view itself (:func:`spectral_vs.estimate_normals` with ``k_neighbors``), turned toward the
@@ -31,24 +31,13 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from spectral_vs._core import PointCloud, estimate_normals, load_organized, rotation_angle
 from spectral_vs.data.scan_windows import place_windows, window_view
-
-if TYPE_CHECKING:
-    from spectral_vs.sim import SimParams
-
-#: The organized Kinect scans (640 x 480) of ``$SPECTRAL_VS_DATA`` used for view pairs:
-#: name -> file. A table top with clutter about 1 m away (0.5-2.1 m deep), and a room with
-#: five people (1.8-9.8 m deep).
-SCANS: dict[str, str] = {
-    "table": "milk_cartoon_all_small_clorox.pcd",
-    "room": "five_people.pcd",
-}
+from spectral_vs.data.scans import SCANS
 
 #: Default window share (each window's share of the image area) of the scan pairs. At 0.5
 #: every overlap down to 0.34 fits in the image (see :func:`make_view_pair`).
@@ -64,27 +53,6 @@ MAX_TRANSLATION = 0.15
 NORMAL_NEIGHBORS = 20
 #: Fewest points a view may have.
 MIN_POINTS = 100
-
-
-def data_dir(data: str | os.PathLike[str] | None = None) -> Path:
-    """Folder of the real scans: ``data`` if given, else ``$SPECTRAL_VS_DATA``, else
-    ``../shared/data`` (relative to the working directory)."""
-    if data is not None:
-        return Path(data)
-    return Path(os.environ.get("SPECTRAL_VS_DATA", "../shared/data"))
-
-
-def scan_path(name: str, data: str | os.PathLike[str] | None = None) -> Path:
-    """Path of the scan ``name`` (a key of :data:`SCANS`) in :func:`data_dir`.
-
-    Raises
-    ------
-    ValueError
-        If ``name`` is not a key of :data:`SCANS`.
-    """
-    if name not in SCANS:
-        raise ValueError(f"name must be one of {sorted(SCANS)}, got {name!r}")
-    return data_dir(data) / SCANS[name]
 
 
 @dataclass(frozen=True, eq=False)
@@ -391,92 +359,15 @@ def view_pairs(
     return pairs
 
 
-def sim_view_pairs(
-    count: int,
-    *,
-    start_set: str = "large",
-    seed: int = 0,
-    params: SimParams | None = None,
-    min_view_share: float = 0.3,
-) -> list[ViewPair]:
-    """``count`` rendered pairs of the simulated table: the wrist camera's view at the
-    home pose (reference) and at the seeded start poses of
-    :func:`spectral_vs.experiment.start_poses` (current).
-
-    The ground truth is ``T_current_reference = inv(T_world_current) T_world_reference``
-    from the simulation's camera poses; both views are in their camera frames with normals
-    toward the camera (``robot.capture()``), the current's viewpoint at the origin.
-
-    Parameters
-    ----------
-    count : int
-        Number of pairs, >= 1.
-    start_set : str
-        A key of ``spectral_vs.experiment.START_SETS`` (``"moderate"`` or ``"large"``).
-    seed : int
-        Seed of the start poses.
-    min_view_share : float
-        Least share of the reference's points in the current camera's field of view
-        (``PyBulletRobot.view_check``, occlusion ignored), in (0, 1].
-    params : spectral_vs.sim.SimParams, optional
-        The simulation (kinematic, 320 x 240, the iiwa at ``sim.HOME_Q`` by default); the
-        reference is rendered at its start configuration ``params.q_start``.
-
-    Returns
-    -------
-    list of ViewPair
-
-    Raises
-    ------
-    ValueError
-        If ``count`` < 1 or ``start_set`` is unknown.
-    ImportError
-        Without PyBullet.
-    """
-    from spectral_vs import sim
-    from spectral_vs.experiment import start_poses
-
-    params = params if params is not None else sim.SimParams()
-    size = (params.camera.intrinsics.width, params.camera.intrinsics.height)
-    pairs = []
-    with sim.PyBulletRobot(params) as robot:
-        q_home = robot.joint_positions() if params.q_start is None else params.q_start
-        # As the extreme set: only starts that keep 30% of the reference's points in view
-        # (two views that share less are not the same scene seen twice).
-        accept = robot.view_check(min_share=min_view_share, q_reference=q_home)
-        starts = start_poses(robot.kinematics, start_set, count, seed, q_home, accept)
-        robot.reset_joint_positions(q_home)
-        reference, T_world_reference = robot.capture(), robot.camera_pose()
-        for q, _, _ in starts:
-            robot.reset_joint_positions(q)
-            current, T_world_current = robot.capture(), robot.camera_pose()
-            pairs.append(
-                ViewPair(
-                    name="sim",
-                    reference=reference,
-                    current=current,
-                    T_current_reference=np.linalg.inv(T_world_current) @ T_world_reference,
-                    current_viewpoint=np.zeros(3),
-                    overlap=None,
-                    image_size=size,
-                )
-            )
-    return pairs
-
-
 __all__ = [
     "MAX_TRANSLATION",
     "NORMAL_NEIGHBORS",
     "OVERLAP_RANGE",
     "ROTATION_RANGE_DEG",
-    "SCANS",
     "WINDOW_SHARE",
     "ViewPair",
-    "data_dir",
     "make_view_pair",
     "random_transform",
     "rotation_angle_deg",
-    "scan_path",
-    "sim_view_pairs",
     "view_pairs",
 ]

@@ -21,7 +21,6 @@ from spectral_vs.sim.camera import (
     NormalParams,
     back_project,
     depth_to_cloud,
-    organized_normals,
     render_depth,
 )
 from spectral_vs.sim.robot import (
@@ -68,7 +67,6 @@ __all__ = [
     "depth_to_cloud",
     "iiwa_model",
     "iiwa_urdf_path",
-    "organized_normals",
     "panda_T_hand_camera",
     "panda_model",
     "panda_urdf_path",

@@ -27,7 +27,6 @@ Every wrapper lists the capture indices it spoiled in ``faults``.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from typing import Any
 
@@ -35,97 +34,8 @@ import numpy as np
 
 from spectral_vs._core import PointCloud
 from spectral_vs.robot import RobotInterface
-
-
-def _empty_cloud() -> PointCloud:
-    """A capture with no point (what a driver returns for a dropped frame)."""
-    return PointCloud(np.zeros((0, 3)), np.zeros((0, 3)))
-
-
-def _indices(captures: Iterable[int], argument: str) -> frozenset[int]:
-    """The capture indices ``captures`` as a set, refusing negative ones (ValueError)."""
-    chosen = frozenset(int(index) for index in captures)
-    if any(index < 0 for index in chosen):
-        raise ValueError(f"{argument} must hold capture indices >= 0, got {sorted(chosen)}")
-    return chosen
-
-
-def _window(start: float, duration: float) -> tuple[float, float]:
-    """A checked window ``[start, start + duration)`` of the robot clock, s."""
-    if not (math.isfinite(start) and start >= 0):
-        raise ValueError(f"start must be finite and >= 0 s, got {start}")
-    if not duration > 0:
-        raise ValueError(f"duration must be > 0 s (inf: for good), got {duration}")
-    return float(start), float(duration)
-
-
-class FaultyCamera:
-    """A :class:`RobotInterface` that forwards every call to ``robot``; subclasses spoil
-    :meth:`capture` through :meth:`_spoil`.
-
-    Parameters
-    ----------
-    robot : RobotInterface
-        The robot whose camera fails.
-    """
-
-    def __init__(self, robot: RobotInterface) -> None:
-        self.robot = robot
-        #: Capture indices (from 0) that the wrapper spoiled.
-        self.faults: list[int] = []
-        self._captures = 0
-        self._start_time = robot.time()
-
-    @property
-    def captures(self) -> int:
-        """Captures made so far."""
-        return self._captures
-
-    def elapsed(self) -> float:
-        """Robot clock since the wrapper was made, s."""
-        return self.robot.time() - self._start_time
-
-    def joint_positions(self) -> np.ndarray:
-        return self.robot.joint_positions()
-
-    def send_joint_velocities(self, q_dot: np.ndarray, dt: float) -> None:
-        self.robot.send_joint_velocities(q_dot, dt)
-
-    def capture(self) -> PointCloud:
-        """The robot's capture, or the spoiled one; recorded in ``faults`` when spoiled."""
-        index = self._captures
-        self._captures += 1
-        cloud = self._spoil(index)
-        if cloud is None:
-            return self._deliver(self.robot.capture())
-        self.faults.append(index)
-        return cloud
-
-    def capture_depth(self) -> np.ndarray:
-        """The robot's depth image (``capture_depth()`` of a
-        :class:`~spectral_vs.sim.PyBulletRobot`), counted as a capture, with the fault's
-        change of the scene in it (:class:`HandOccluder`'s box). A fault that spoils the
-        point cloud itself has no depth-image form here (ValueError)."""
-        index = self._captures
-        self._captures += 1
-        if self._spoil(index) is not None:
-            raise ValueError(f"{type(self).__name__} spoils point clouds: no depth image form")
-        robot: Any = self.robot  # a PyBulletRobot, or another wrapper of one
-        return robot.capture_depth()
-
-    def stop(self) -> None:
-        self.robot.stop()
-
-    def time(self) -> float:
-        return self.robot.time()
-
-    def _spoil(self, index: int) -> PointCloud | None:
-        """The spoiled capture number ``index``, or None to capture normally."""
-        return None
-
-    def _deliver(self, cloud: PointCloud) -> PointCloud:
-        """A normal capture on its way out (subclasses may keep it)."""
-        return cloud
+from spectral_vs.sim.faulty_camera import FaultyCamera, _empty_cloud, _indices, _window
+from spectral_vs.sim.occluders import HandOccluder
 
 
 class DroppedFrames(FaultyCamera):
@@ -198,105 +108,6 @@ class RepeatedFrames(FaultyCamera):
     def _deliver(self, cloud: PointCloud) -> PointCloud:
         self._last = cloud
         return cloud
-
-
-class HandOccluder(FaultyCamera):
-    """A box in front of the camera while the robot clock is in ``[start, start +
-    duration)`` since the wrapper was made.
-
-    The box is a visual-only body of the robot's PyBullet client (it collides with
-    nothing), created at the first capture in the window with its centre ``distance``
-    along the camera's optical axis (plus ``offset`` across it) and its faces parallel to
-    the image plane, and removed at the first capture after the window (or by
-    :meth:`remove`). It follows the camera (a hand held in front of it), moving across the
-    view at ``sweep`` m/s along the camera's x axis (a hand passing by: centred at the
-    window's middle), or stays where it appeared with ``follow=False`` (a tool left in
-    view). A 9 cm box at 0.25 m hides about a tenth of a 58 degree view: part of the
-    scene, not all of it.
-
-    Parameters
-    ----------
-    robot : PyBulletRobot
-        The simulated robot: it needs ``client`` and ``camera_pose()``.
-    start : float
-        When the box appears, s of robot clock since the wrapper was made.
-    duration : float
-        How long it stays, s (``math.inf``: for good).
-    distance : float
-        Distance of the box's centre from the camera along the optical axis, m.
-    size : float or (float, float, float)
-        Edge of the cubic box, or its edges along the camera's x, y and z, m (a hand:
-        about 0.08-0.10, or 0.1 x 0.2 x 0.05).
-    offset : (float, float)
-        Offset of the box's centre across the optical axis (camera x right, y down), m.
-    sweep : float
-        Speed of the box across the view along the camera's x axis, m/s (needs a finite
-        ``duration``); 0: still.
-    follow : bool
-        The box follows the camera (True) or stays where it first appeared (False).
-    """
-
-    def __init__(
-        self,
-        robot: RobotInterface,
-        start: float,
-        duration: float = 1.0,
-        *,
-        distance: float = 0.25,
-        size: float | tuple[float, float, float] = 0.09,
-        offset: tuple[float, float] = (0.0, 0.0),
-        sweep: float = 0.0,
-        follow: bool = True,
-    ) -> None:
-        super().__init__(robot)
-        if not hasattr(robot, "client") or not hasattr(robot, "camera_pose"):
-            raise ValueError("robot must be a PyBulletRobot (with client and camera_pose)")
-        self.start, self.duration = _window(start, duration)
-        edges = np.broadcast_to(np.asarray(size, dtype=float), (3,)).copy()
-        if not (np.isfinite(edges).all() and (edges > 0).all()):
-            raise ValueError(f"size must be finite and > 0 m, got {size}")
-        if not (math.isfinite(distance) and distance > edges[2] / 2):
-            raise ValueError(f"distance must be finite and > size / 2 m, got {distance}")
-        if not math.isfinite(sweep) or (sweep != 0 and not math.isfinite(duration)):
-            raise ValueError(f"sweep must be finite m/s, with a finite duration; got {sweep}")
-        self.distance, self.edges = float(distance), edges
-        self.size = float(edges.max())
-        self.offset = (float(offset[0]), float(offset[1]))
-        self.sweep, self.follow = float(sweep), bool(follow)
-        self._sim: Any = robot  # a PyBulletRobot: its client and ground-truth camera pose
-        #: PyBullet body id of the box while it is present, else None.
-        self.body: int | None = None
-
-    def _spoil(self, index: int) -> PointCloud | None:
-        elapsed = self.elapsed() + 1e-9  # the clock adds up periods of dt
-        if self.start <= elapsed < self.start + self.duration:
-            if self.body is None or self.follow:
-                self._place(elapsed)
-            self.faults.append(index)
-        else:
-            self.remove()
-        return None  # the camera renders the scene with the box in it
-
-    def _place(self, elapsed: float) -> None:
-        """Create the box if needed and put it in front of the camera."""
-        client = self._sim.client
-        if self.body is None:
-            shape = client.createVisualShape(
-                client.GEOM_BOX, halfExtents=(self.edges / 2).tolist(), rgbaColor=[0.9, 0.7, 0.6, 1]
-            )
-            self.body = int(client.createMultiBody(baseMass=0.0, baseVisualShapeIndex=shape))
-        T = np.asarray(self._sim.camera_pose(), dtype=float)
-        x = self.offset[0]
-        if self.sweep:
-            x += self.sweep * (elapsed - self.start - self.duration / 2)
-        centre = T[:3, :3] @ np.array([x, self.offset[1], self.distance]) + T[:3, 3]
-        client.resetBasePositionAndOrientation(self.body, centre.tolist(), _quaternion(T[:3, :3]))
-
-    def remove(self) -> None:
-        """Take the box out of the simulation (idempotent)."""
-        if self.body is not None:
-            self._sim.client.removeBody(self.body)
-            self.body = None
 
 
 class StrayPoints(FaultyCamera):
@@ -402,23 +213,6 @@ class Latency(FaultyCamera):
         if len(self._frames) > self.periods + 1:
             self._frames.pop(0)
         return self._frames[0]
-
-
-def _quaternion(R: np.ndarray) -> list[float]:
-    """(x, y, z, w) quaternion of a rotation matrix (Shepperd's method: from the largest of
-    the trace and the diagonal terms, robust at every angle)."""
-    trace = float(np.trace(R))
-    k = int(np.argmax(np.diag(R)))
-    if trace >= R[k, k]:
-        s = math.sqrt(1.0 + trace) * 2.0
-        return [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
-    i, j = (k + 1) % 3, (k + 2) % 3
-    s = math.sqrt(1.0 + R[k, k] - R[i, i] - R[j, j]) * 2.0
-    q = [0.0, 0.0, 0.0, (R[j, i] - R[i, j]) / s]
-    q[k] = s / 4.0
-    q[i] = (R[i, k] + R[k, i]) / s
-    q[j] = (R[j, k] + R[k, j]) / s
-    return q
 
 
 __all__ = [

@@ -14,8 +14,6 @@ import math
 import os
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -24,17 +22,17 @@ from pybullet_utils.bullet_client import BulletClient
 
 from spectral_vs._core import Kinematics, PointCloud
 from spectral_vs.field_of_view import ViewCheck
-from spectral_vs.sim.camera import CameraParams, back_project, depth_to_cloud, render_depth
+from spectral_vs.sim.camera import back_project, depth_to_cloud, render_depth
+from spectral_vs.sim.pybullet_poses import pose_matrix
 from spectral_vs.sim.robots import (
     BASE_LINK,
     HOME_Q,
     TIP_LINK,
-    RobotModel,
     default_T_tip_camera,
-    iiwa_model,
     iiwa_urdf_path,
 )
-from spectral_vs.sim.scene import PlacedObject, TableSceneParams, build_scene
+from spectral_vs.sim.scene import PlacedObject, build_scene
+from spectral_vs.sim.settings import SimParams
 
 __all__ = [
     "BASE_LINK",
@@ -46,62 +44,6 @@ __all__ = [
     "iiwa_urdf_path",
     "pose_matrix",
 ]
-
-
-@dataclass
-class SimParams:
-    """The simulation.
-
-    Attributes
-    ----------
-    mode : {"kinematic", "dynamic"}
-        ``"kinematic"``: joints integrate the commanded velocities exactly
-        (``resetJointState``), deterministic, for tests. ``"dynamic"``: PyBullet velocity
-        motors with torque limits, ``stepSimulation`` at ``time_step``, gravity on.
-    time_step : float
-        Physics step in dynamic mode, s.
-    max_joint_speed : float
-        Speed the simulated drives saturate at, rad/s (each joint clamped separately, as
-        hardware does; the URDF's 10 rad/s is not a real iiwa's 1.5-2.3 rad/s).
-    max_joint_torque : float
-        Torque limit of every motor in dynamic mode, N m (the URDF gives 300).
-    robot : RobotModel
-        The arm: URDF, chain, home configuration, camera mount (the iiwa by default; see
-        :func:`spectral_vs.sim.robots.robot_model`).
-    q_start : tuple of float, optional
-        Joint positions at construction, rad; ``robot.home_q`` when not given.
-    T_tip_camera : ndarray, shape (4, 4), optional
-        Pose of the camera frame (Z forward, X right, Y down) in the robot's tip link;
-        ``robot.T_tip_camera`` when not given.
-    camera : CameraParams
-        Intrinsics, depth noise and normal estimation.
-    scene : TableSceneParams
-        Table and clutter.
-    """
-
-    mode: Literal["kinematic", "dynamic"] = "kinematic"
-    time_step: float = 1.0 / 240.0
-    max_joint_speed: float = 1.5
-    max_joint_torque: float = 300.0
-    robot: RobotModel = field(default_factory=iiwa_model)
-    q_start: tuple[float, ...] | None = None
-    T_tip_camera: np.ndarray | None = None
-    camera: CameraParams = field(default_factory=CameraParams)
-    scene: TableSceneParams = field(default_factory=TableSceneParams)
-
-    def __post_init__(self) -> None:
-        if self.mode not in ("kinematic", "dynamic"):
-            raise ValueError(f"mode must be 'kinematic' or 'dynamic', got {self.mode!r}")
-        if (
-            not self.time_step > 0.0
-            or not self.max_joint_speed > 0.0
-            or not self.max_joint_torque > 0.0
-        ):
-            raise ValueError("time_step, max_joint_speed and max_joint_torque must be > 0")
-        if self.q_start is None:
-            self.q_start = self.robot.home_q
-        if self.T_tip_camera is None:
-            self.T_tip_camera = np.array(self.robot.T_tip_camera)
 
 
 @contextlib.contextmanager
@@ -119,35 +61,6 @@ def _stdout_to_stderr() -> Iterator[None]:
     finally:
         os.dup2(saved, 1)
         os.close(saved)
-
-
-def pose_matrix(position, quaternion) -> np.ndarray:
-    """4 x 4 transform from a PyBullet position and (x, y, z, w) quaternion.
-
-    PyBullet's quaternions are unit length only to float precision (about 1e-7); the
-    quaternion is normalised so that the rotation is orthonormal to double precision.
-
-    Parameters
-    ----------
-    position : array_like, shape (3,)
-        Translation, metres.
-    quaternion : array_like, shape (4,)
-        Rotation as PyBullet orders it: (x, y, z, w); any non-zero length.
-
-    Returns
-    -------
-    ndarray, shape (4, 4)
-        The rigid transform.
-    """
-    x, y, z, w = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)
-    T = np.eye(4)
-    T[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
-    T[:3, 3] = position
-    return T
 
 
 class PyBulletRobot:
