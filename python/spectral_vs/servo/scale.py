@@ -12,11 +12,14 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from spectral_vs._core import PointCloud, view_scale
-from spectral_vs.servo.settings import ServoParams
+
+if TYPE_CHECKING:  # the settings read their scale from here (ServoParams.resolved)
+    from spectral_vs.servo.settings import ServoParams
 
 #: Voxels across the reference's extent (``view_scale``'s ``voxels_across``): the voxel is
 #: ``max(extent / 37, 3 extent / sqrt(N))``, 15.0 mm on the simulated table (extent
