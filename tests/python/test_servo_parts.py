@@ -1,0 +1,77 @@
+"""The servo's frame gate on its own, without a servo around it: the holds on empty, thin
+and stale frames, and the occluders it drops in front of a wall, against the geometry of
+the scene."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spectral_vs import PointCloud
+from spectral_vs.servo import ServoParams
+from spectral_vs.servo.gate import FrameGate
+from spectral_vs.servo.records import _empty_record
+
+
+def square(depth: float, half: float, step: float) -> np.ndarray:
+    """A square of points facing the camera at ``depth`` m, ``half`` m across each way."""
+    u = np.arange(-half, half + step / 2, step)
+    x, y = np.meshgrid(u, u)
+    return np.column_stack([x.ravel(), y.ravel(), np.full(x.size, depth)])
+
+
+def cloud(points: np.ndarray) -> PointCloud:
+    return PointCloud(points, np.tile([0.0, 0.0, -1.0], (len(points), 1)))
+
+
+WALL = square(1.0, 0.4, 0.01)  # the reference: a wall 1 m ahead, 0.8 m wide
+PARAMS = ServoParams(min_points=100, occlusion_margin=0.05)
+
+
+def test_the_gate_holds_on_an_empty_a_thin_and_a_stale_frame():
+    gate = FrameGate(PARAMS, WALL)
+    frame = cloud(WALL)
+    assert gate.fault(frame, 0, None)[0] == "empty_cloud"
+    hold, message = gate.fault(frame, 99, None)
+    assert hold == "too_few_points"
+    assert "99 points" in message and "min_points 100" in message
+    assert gate.fault(frame, len(frame), 1.0) is None
+    assert gate.fault(frame, len(frame), 1.0)[0] == "stale_frame"  # its stamp again
+    gate.reset()
+    assert gate.fault(frame, len(frame), 1.0) is None  # a new run: no last frame
+
+
+@pytest.mark.parametrize(("board_half", "holds"), [(0.1, False), (0.14, True)])
+def test_the_gate_drops_a_board_in_front_of_the_wall_and_measures_what_it_hides(board_half, holds):
+    """A board at 0.4 m hides the wall's middle; seen through the camera it covers the
+    square of half-width 2.5 board_half at 1 m: 0.39 of the wall's area for a 20 cm board
+    (under occlusion_max_share 0.5: registered on the rest), 0.77 for a 28 cm one (most
+    of the reference behind it: the step holds)."""
+    gate = FrameGate(PARAMS, WALL)
+    board = square(0.4, board_half, 0.005)
+    shadow = 2.5 * board_half  # the board's half-width seen on the wall, m
+    seen = WALL[np.abs(WALL[:, :2]).max(axis=1) > shadow + 1e-9]
+    frame = cloud(np.vstack([seen, board]))
+    record = _empty_record(0, len(frame))
+
+    kept, occluded, hidden, message = gate.drop_occluders(frame, record, np.eye(4))
+
+    assert record.occluded_points == len(board)  # every board point, no wall point
+    np.testing.assert_array_equal(np.asarray(kept.points), seen)
+    assert occluded
+    expected = ((2 * shadow) / 0.8) ** 2  # the hidden share of the wall's area
+    assert hidden == pytest.approx(expected, abs=0.05)
+    assert record.hidden_share == hidden
+    if holds:
+        assert message is not None and "occlusion_max_share 0.5" in message
+    else:
+        assert message is None
+
+
+def test_without_an_estimate_the_gate_drops_nothing():
+    gate = FrameGate(PARAMS, WALL)
+    frame = cloud(np.vstack([WALL, square(0.4, 0.1, 0.005)]))
+    record = _empty_record(0, len(frame))
+    kept, occluded, hidden, message = gate.drop_occluders(frame, record, None)
+    assert kept is frame and not occluded and hidden == 0.0 and message is None
+    assert record.occluded_points == 0
