@@ -14,8 +14,9 @@ from spectral_vs.cli.common import (
     _count,
     _duration,
     covariance_report,
-    describe_transform,
+    error_report,
     print_errors,
+    print_transform,
     verdict_line,
 )
 
@@ -54,10 +55,8 @@ def json_report(
         "voxel_size_m": float(result.voxel_size),
         "model_points": points[0],
         "scene_points": points[1],
+        **error_report(errors),
     }
-    if errors is not None:
-        report["rotation_error_deg"] = errors[0]
-        report["translation_error_mm"] = errors[1]
     return report
 
 
@@ -80,11 +79,10 @@ def print_result(
     errors: tuple[float, float] | None,
 ) -> None:
     """The pose, the state and the errors, as text."""
-    T = np.asarray(result.T_scene_model)
-    with np.printoptions(precision=6, suppress=True):
-        print("T_scene_model (moves MODEL coordinates into the SCENE frame, metres):")
-        print(T)
-    print(describe_transform(T))
+    print_transform(
+        "T_scene_model (moves MODEL coordinates into the SCENE frame, metres):",
+        np.asarray(result.T_scene_model),
+    )
     ending = "ended normally" if result.converged else f"stopped ({result.stop_reason})"
     print(
         f"search {ending}, {_count(result.iterations, 'iteration')} of Algorithm 1, fitness "

@@ -312,6 +312,21 @@ def ground_truth_errors(
     return errors, _within(errors, (args.max_rotation_error, args.max_translation_error))
 
 
+def print_transform(caption: str, T: np.ndarray) -> None:
+    """``caption``, the 4 x 4 transform ``T`` and its rotation and translation in words."""
+    with np.printoptions(precision=6, suppress=True):
+        print(caption)
+        print(T)
+    print(describe_transform(T))
+
+
+def error_report(errors: tuple[float, float] | None) -> dict[str, float]:
+    """The --json fields of the errors against --ground-truth (none without one)."""
+    if errors is None:
+        return {}
+    return {"rotation_error_deg": errors[0], "translation_error_mm": errors[1]}
+
+
 def print_errors(args: argparse.Namespace, errors: tuple[float, float] | None, at: str) -> None:
     """The errors against --ground-truth (the translation's measured ``at`` a point) and
     whether they are within the limits, when a ground truth was given."""

@@ -24,10 +24,11 @@ from spectral_vs.cli.common import (
     add_sensor_origin,
     check_paths,
     covariance_report,
-    describe_transform,
+    error_report,
     ground_truth_errors,
     load_clouds,
     print_errors,
+    print_transform,
     read_transform,
     save_moved,
     verdict_line,
@@ -230,10 +231,8 @@ def _report(
         "timings_s": timings,
         "reference_points": points[0],
         "current_points": points[1],
+        **error_report(errors),
     }
-    if errors is not None:
-        report["rotation_error_deg"] = errors[0]
-        report["translation_error_mm"] = errors[1]
     return report
 
 
@@ -244,11 +243,10 @@ def _print_result(
     errors: tuple[float, float] | None,
 ) -> None:
     """The pose, the support and the errors, as text."""
-    T = np.asarray(result.T_current_reference)
-    with np.printoptions(precision=6, suppress=True):
-        print("T_current_reference (moves REFERENCE coordinates into CURRENT's frame, metres):")
-        print(T)
-    print(describe_transform(T))
+    print_transform(
+        "T_current_reference (moves REFERENCE coordinates into CURRENT's frame, metres):",
+        np.asarray(result.T_current_reference),
+    )
     support = result.support
     source = "the prior" if result.hypothesis == -1 else f"hypothesis {result.hypothesis}"
     print(verdict_line(result))

@@ -87,7 +87,7 @@ class SpectralServo:
         remember (the last frame, the outage's start)."""
         self._relocalizer.reset()
         self._tracked.reset()  # and no global registration taken in this run
-        self._tracker.last_turn = 0.0
+        self._tracker.reset()
         self._steps = 0
         self._stop_rule.reset()
         self._odometry.reset()

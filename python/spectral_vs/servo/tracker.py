@@ -43,6 +43,10 @@ class Tracker:
             if params.plane.plane_turn
             else None
         )
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: no plane turn yet."""
         self.last_turn = 0.0  #: the plane turn of the last estimate, rad
 
     def register(

@@ -34,7 +34,7 @@ import numpy as np
 
 from spectral_vs._core import PointCloud
 from spectral_vs.robot import RobotInterface
-from spectral_vs.sim.faulty_camera import FaultyCamera, _empty_cloud, _indices, _window
+from spectral_vs.sim.faulty_camera import FaultyCamera, capture_indices, clock_window, empty_capture
 from spectral_vs.sim.occluders import HandOccluder
 
 
@@ -51,10 +51,10 @@ class DroppedFrames(FaultyCamera):
 
     def __init__(self, robot: RobotInterface, captures: Iterable[int]) -> None:
         super().__init__(robot)
-        self.dropped = _indices(captures, "captures")
+        self.dropped = capture_indices(captures, "captures")
 
     def _spoil(self, index: int) -> PointCloud | None:
-        return _empty_cloud() if index in self.dropped else None
+        return empty_capture() if index in self.dropped else None
 
 
 class Outage(FaultyCamera):
@@ -74,12 +74,12 @@ class Outage(FaultyCamera):
 
     def __init__(self, robot: RobotInterface, start: float, duration: float) -> None:
         super().__init__(robot)
-        self.start, self.duration = _window(start, duration)
+        self.start, self.duration = clock_window(start, duration)
 
     def _spoil(self, index: int) -> PointCloud | None:
         # A small tolerance: the clock adds up periods of dt, e.g. 0.1 * 3 = 0.30000000000000004.
         elapsed = self.elapsed() + 1e-9
-        return _empty_cloud() if self.start <= elapsed < self.start + self.duration else None
+        return empty_capture() if self.start <= elapsed < self.start + self.duration else None
 
 
 class RepeatedFrames(FaultyCamera):
@@ -97,7 +97,7 @@ class RepeatedFrames(FaultyCamera):
 
     def __init__(self, robot: RobotInterface, captures: Iterable[int]) -> None:
         super().__init__(robot)
-        self.repeated = _indices(captures, "captures")
+        self.repeated = capture_indices(captures, "captures")
         if 0 in self.repeated:
             raise ValueError("captures must hold indices >= 1: capture 0 has no previous frame")
         self._last: PointCloud | None = None

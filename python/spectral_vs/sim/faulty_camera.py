@@ -14,12 +14,12 @@ from spectral_vs._core import PointCloud
 from spectral_vs.robot import RobotInterface
 
 
-def _empty_cloud() -> PointCloud:
+def empty_capture() -> PointCloud:
     """A capture with no point (what a driver returns for a dropped frame)."""
     return PointCloud(np.zeros((0, 3)), np.zeros((0, 3)))
 
 
-def _indices(captures: Iterable[int], argument: str) -> frozenset[int]:
+def capture_indices(captures: Iterable[int], argument: str) -> frozenset[int]:
     """The capture indices ``captures`` as a set, refusing negative ones (ValueError)."""
     chosen = frozenset(int(index) for index in captures)
     if any(index < 0 for index in chosen):
@@ -27,7 +27,7 @@ def _indices(captures: Iterable[int], argument: str) -> frozenset[int]:
     return chosen
 
 
-def _window(start: float, duration: float) -> tuple[float, float]:
+def clock_window(start: float, duration: float) -> tuple[float, float]:
     """A checked window ``[start, start + duration)`` of the robot clock, s."""
     if not (math.isfinite(start) and start >= 0):
         raise ValueError(f"start must be finite and >= 0 s, got {start}")

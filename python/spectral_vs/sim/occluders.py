@@ -11,7 +11,7 @@ import numpy as np
 
 from spectral_vs._core import PointCloud
 from spectral_vs.robot import RobotInterface
-from spectral_vs.sim.faulty_camera import FaultyCamera, _window
+from spectral_vs.sim.faulty_camera import FaultyCamera, clock_window
 from spectral_vs.sim.pybullet_poses import quaternion
 
 
@@ -66,7 +66,7 @@ class HandOccluder(FaultyCamera):
         super().__init__(robot)
         if not hasattr(robot, "client") or not hasattr(robot, "camera_pose"):
             raise ValueError("robot must be a PyBulletRobot (with client and camera_pose)")
-        self.start, self.duration = _window(start, duration)
+        self.start, self.duration = clock_window(start, duration)
         edges = np.broadcast_to(np.asarray(size, dtype=float), (3,)).copy()
         if not (np.isfinite(edges).all() and (edges > 0).all()):
             raise ValueError(f"size must be finite and > 0 m, got {size}")
