@@ -65,7 +65,7 @@ Damping of the least-squares pseudo-inverse (Nakamura; Chiaverini).
 With s_min the smallest singular value of J, ``lambda^2 = (1 - (s_min / eps)^2) lambda_max^2``
 when ``s_min < eps`` and 0 otherwise; ``x = sum_i s_i / (s_i^2 + lambda^2) v_i u_i^T b``.
 
-Parameters
+Attributes
 ----------
 singular_value_threshold : float
     eps, where damping starts (units of J: m/rad for linear rows, 1 for angular rows).
@@ -99,7 +99,7 @@ max_damping : float
   py::class_<VelocityCommandParams> command_params(m, "VelocityCommandParams", R"doc(
 Settings of :meth:`Kinematics.joint_velocities`.
 
-Parameters
+Attributes
 ----------
 dt : float
     Control period, s: no joint may cross a position limit within it.
