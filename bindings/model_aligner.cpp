@@ -2,12 +2,82 @@
 #include "conversions.hpp"
 
 #include <spectral_vs/alignment/model_aligner.hpp>
+#include <spectral_vs/alignment/plane_turn.hpp>
 
 #include <pybind11/stl.h>
 
 #include <sstream>
 
 namespace spectral_vs::python {
+
+namespace {
+
+void define_plane_turn(py::module_& m) {
+  const PlaneTurnParams defaults;
+  py::class_<PlaneTurn>(m, "PlaneTurn", R"doc(
+The turn about a reference view's dominant plane (a table top): the registration's
+rotation law along the plane's normal, on the EGIs of the normals off the plane (C++
+``PlaneTurn``, the servo's ``ServoParams.plane``). Made once per reference by ``of``.
+)doc")
+      .def_static(
+          "of",
+          [](const PointCloud& reference, double plane_cone, double min_plane_share, int stride,
+             int bandwidth, int fine_bandwidth, double max_tilt, const AlignParams& law) {
+            PlaneTurnParams params;
+            params.plane_cone = plane_cone;
+            params.min_plane_share = min_plane_share;
+            params.stride = stride;
+            params.bandwidth = bandwidth;
+            params.fine_bandwidth = fine_bandwidth;
+            params.max_tilt = max_tilt;
+            params.law = law;
+            py::gil_scoped_release release;
+            return PlaneTurn::of(reference, params);
+          },
+          py::arg("reference"), py::kw_only(), py::arg("plane_cone") = defaults.plane_cone,
+          py::arg("min_plane_share") = defaults.min_plane_share,
+          py::arg("stride") = defaults.stride, py::arg("bandwidth") = defaults.bandwidth,
+          py::arg("fine_bandwidth") = defaults.fine_bandwidth,
+          py::arg("max_tilt") = defaults.max_tilt, py::arg("law") = defaults.law, R"doc(
+The turn of a reference view, or None when it has no dominant plane.
+
+Parameters
+----------
+reference : PointCloud
+    The reference view with normals, as captured.
+plane_cone : float
+    Half-angle about the dominant normal whose normals are the plane's, rad, in (0, pi/2).
+min_plane_share : float
+    None when less than this share of the reference's normals lies in the cone.
+stride : int
+    Every stride-th normal is read, >= 1.
+bandwidth, fine_bandwidth : int
+    B of the coarse step (the registration's) and of the fine one near the goal (the
+    larger of the two is used), in [2, 64].
+max_tilt : float
+    No turn while the current view's plane normal is farther than this from where the
+    estimate puts the reference's, rad.
+law : AlignParams
+    The rotation law (rotation_step, max_rotation_step; the gain is taken as 1).
+)doc")
+      .def(
+          "turn",
+          [](const PlaneTurn& self, const PointCloud& current, const py::handle& T) {
+            const Transform T_current_reference = to_transform(T, "T_current_reference");
+            py::gil_scoped_release release;
+            return self.turn(current, T_current_reference.topLeftCorner<3, 3>());
+          },
+          py::arg("current"), py::arg("T_current_reference"),
+          "The turn about ``axis`` (rad, right-multiplied: ``R exp(turn axis)``) that ascends "
+          "the correlation of the off-plane EGIs from the estimate ``T_current_reference``, "
+          "given the current view (with normals, as captured); 0 when it shows too few "
+          "normals off its plane or its plane is tilted past max_tilt.")
+      .def_property_readonly(
+          "axis", [](const PlaneTurn& self) { return Eigen::Vector3d(self.axis()); },
+          "The reference's dominant normal, reference frame (unit).");
+}
+
+}  // namespace
 
 void define_model_aligner(py::module_& m) {
   py::class_<ModelAlignerTimings>(m, "ModelAlignerTimings",
@@ -87,6 +157,8 @@ params : AlignParams
             << ", bandwidth=" << a.params().scene.bandwidth << ")";
         return out.str();
       });
+
+  define_plane_turn(m);
 }
 
 }  // namespace spectral_vs::python

@@ -852,6 +852,25 @@ class ModelAligner:
     @property
     def last_timings(self) -> ModelAlignerTimings: ...
 
+class PlaneTurn:
+    """The turn about a reference view's dominant plane (a table top)."""
+
+    @staticmethod
+    def of(
+        reference: PointCloud,
+        *,
+        plane_cone: float = 0.3490658503988659,
+        min_plane_share: float = 0.3,
+        stride: int = 4,
+        bandwidth: int = 16,
+        fine_bandwidth: int = 16,
+        max_tilt: float = 0.08726646259971647,
+        law: AlignParams = ...,
+    ) -> PlaneTurn | None: ...
+    def turn(self, current: PointCloud, T_current_reference: npt.ArrayLike) -> float: ...
+    @property
+    def axis(self) -> _Array: ...  # (3,)
+
 # --- Two views of one scene (bindings/view_aligner.cpp) ---------------------
 
 class ViewScale:

@@ -1,12 +1,13 @@
 """The servo's frame gate on its own, without a servo around it: the holds on empty, thin
 and stale frames, and the occluders it drops in front of a wall, against the geometry of
-the scene."""
+the scene; and the plane turn of the tracker against a known turn about a table."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+import spectral_vs as svs
 from spectral_vs import PointCloud
 from spectral_vs.servo import ServoParams
 from spectral_vs.servo.gate import FrameGate
@@ -75,3 +76,50 @@ def test_without_an_estimate_the_gate_drops_nothing():
     kept, occluded, hidden, message = gate.drop_occluders(frame, record, None)
     assert kept is frame and not occluded and hidden == 0.0 and message is None
     assert record.occluded_points == 0
+
+
+def table_with_blocks() -> PointCloud:
+    """A table's normals (up, two thirds of the view) and the sides of three blocks turned
+    15, 40 and 70 degrees about the table's normal: the rotation about it shows only in
+    the blocks."""
+    normals = [np.tile([0.0, 0.0, 1.0], (3000, 1))]
+    for yaw in np.radians([15.0, 40.0, 70.0]):
+        sides = [[np.cos(yaw + k * np.pi / 2), np.sin(yaw + k * np.pi / 2), 0.0] for k in range(4)]
+        normals.append(np.repeat(sides, 125, axis=0))
+    n = np.vstack(normals)
+    return PointCloud(np.random.default_rng(0).uniform(-0.3, 0.3, n.shape), n)
+
+
+def about_z(degrees: float) -> np.ndarray:
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_the_plane_turn_turns_the_estimate_about_the_tables_normal():
+    from spectral_vs.servo.plane_turn import _PlaneTurn
+
+    params = ServoParams()
+    reference = table_with_blocks()
+    turn = _PlaneTurn.of(reference, np.zeros(3), params, svs.AlignParams())
+    assert turn is not None
+    assert np.degrees(np.arccos(min(1.0, turn.axis[2]))) < 0.1
+    R_true = about_z(3.0)
+    current = PointCloud(np.asarray(reference.points) @ R_true.T,
+                         np.asarray(reference.normals) @ R_true.T)  # fmt: skip
+    step = turn.turn(current, np.eye(4))
+    assert np.degrees(step) == pytest.approx(3.0, abs=0.75)
+    T = turn.turned(np.eye(4), step)
+    np.testing.assert_allclose(T[:3, :3], about_z(np.degrees(step)), atol=1e-12)
+    # A view of the table alone has nothing off the plane to turn by.
+    up = np.tile([0.0, 0.0, 1.0], (500, 1))
+    assert turn.turn(PointCloud(up, up), np.eye(4)) == 0.0
+
+
+def test_the_plane_turn_refuses_settings_out_of_range_naming_them():
+    reference = table_with_blocks()
+    with pytest.raises(ValueError, match="plane_cone"):
+        svs._core.PlaneTurn.of(reference, plane_cone=2.0)
+    with pytest.raises(ValueError, match="stride"):
+        svs._core.PlaneTurn.of(reference, stride=0)
+    up = np.tile([0.0, 0.0, 1.0], (500, 1))
+    assert svs._core.PlaneTurn.of(PointCloud(up, up)) is None  # no normal off the plane

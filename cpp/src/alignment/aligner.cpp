@@ -57,7 +57,7 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
   prepared.timings.algorithm1 = seconds_since(started);
   if (params.local.icp) {
     const StageTimer timer(&prepared.timings, &AlignTimings::icp);
-    refine_with_icp(problem, model, scene, result, kLocalIcpPoints);
+    refine_with_icp(problem, model, scene, result, /*local=*/true);
   }
   // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
   const StageTimer timer(&prepared.timings, &AlignTimings::alternatives);

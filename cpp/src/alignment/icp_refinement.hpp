@@ -29,6 +29,15 @@ struct IcpSettings {
 /// the goal). A kept ICP is checked by the fitness over all the model's points.
 constexpr Eigen::Index kLocalIcpPoints = 1000;
 
+/// The settings of the ICP after a step of Algorithm 1 without global search: about
+/// kLocalIcpPoints model points, those facing `viewpoint` when the scene is a single view.
+inline IcpSettings local_icp_settings(const std::optional<Eigen::Vector3d>& viewpoint) {
+  IcpSettings settings;
+  settings.viewpoint = viewpoint;
+  settings.max_points = kLocalIcpPoints;
+  return settings;
+}
+
 /// Outcome of `refine_point_to_plane`.
 struct IcpOutcome {
   Transform T_scene_model = Transform::Identity();

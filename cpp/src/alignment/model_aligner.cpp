@@ -170,12 +170,9 @@ struct ModelAligner::Impl {
     timings.fitness = seconds_since(t);
     if (params.local.icp) {
       t = Clock::now();
-      detail::IcpSettings settings;
-      settings.viewpoint = detail::declared_viewpoint(params);
-      settings.max_points = detail::kLocalIcpPoints;
       detail::refine_with_icp(
-          model, scene, voxel_size, settings, dense_model,
-          [&](const Transform& T) { return fitness_of(pose_of(T)); }, result);
+          model, scene, voxel_size, detail::local_icp_settings(detail::declared_viewpoint(params)),
+          dense_model, [&](const Transform& T) { return fitness_of(pose_of(T)); }, result);
       timings.icp = seconds_since(t);
     }
     t = Clock::now();

@@ -75,10 +75,10 @@ void polish_result_rotation(const Problem& problem, std::optional<TranslationWin
                             AlignResult& result);
 
 /// The ICP refinement of a result (AlignParams::refinement.icp_refinement, or
-/// LocalParams::icp with `max_points` kLocalIcpPoints), against the whole scene; kept
+/// LocalParams::icp when `local`: local_icp_settings), against the whole scene; kept
 /// unless it loses fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
-                     AlignResult& result, Eigen::Index max_points = IcpSettings().max_points);
+                     AlignResult& result, bool local = false);
 
 /// The two-stage point-to-plane ICP of `result`'s pose (`fine`: the second, tighter stage
 /// too), kept unless its fitness (`fitness_of` a pose) is more than a slide off the object

@@ -1,25 +1,16 @@
 """The plane turn (``ServoParams.plane_turn``): the turn of each estimate about the
-reference's dominant normal (a table top's) by the registration's rotation law
-(:func:`spectral_vs.rotation_step_about`) on the EGIs without that plane; and the dominant
-plane of a view, which the turn and the levelling recovery use."""
+reference's dominant normal (a table top's), computed in the core
+(:class:`spectral_vs._core.PlaneTurn`); and the dominant plane of a view, which the levelling
+recovery uses."""
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from spectral_vs._core import (
-    AlignParams,
-    AxisRotationStep,
-    PointCloud,
-    So3Correlation,
-    dominant_direction,
-    egi_coefficients,
-    rotation_step_about,
-)
+from spectral_vs._core import AlignParams, PlaneTurn, PointCloud, dominant_direction
 from spectral_vs._core import dominant_plane as _dominant_plane
 from spectral_vs.poses import rotation_matrix
 from spectral_vs.servo.settings import ServoParams
@@ -124,103 +115,56 @@ def _turn_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return rotation_matrix(axis / sine * math.atan2(sine, float(a @ b)))
 
 
-#: Fewest normals off the dominant plane (reference or current view) for the plane turn.
-_MIN_OFF_PLANE = 50
-
-
 @dataclass
 class _PlaneTurn:
-    """The reference's side of the turn about its dominant normal (``ServoParams.plane_turn``).
+    """The servo's turn about the reference's dominant normal (``ServoParams.plane_turn``):
+    the core's :class:`spectral_vs._core.PlaneTurn` (the registration's rotation law along that
+    normal, on the EGIs of the normals off the plane), and the turned estimate.
 
     Attributes
     ----------
+    core : PlaneTurn
+        The reference's side of the turn, made once.
     axis : ndarray, shape (3,)
         The reference's dominant normal (the table's), reference camera frame.
     centroid : ndarray, shape (3,)
         The reference's centroid, m: the registration turns the reference about it.
-    coefficients : ndarray, shape (B**2,)
-        EGI coefficients of the reference's normals outside ``plane_cone`` of ``axis``.
-    bandwidth : int
-        Their bandwidth B (the larger of ``plane_turn_bandwidth`` and ``bandwidth``).
-    cos_cone : float
-        Cosine of ``ServoParams.plane_cone``.
-    law : AlignParams
-        The rotation law the turn steps by (:func:`spectral_vs.rotation_step_about`): the
-        registration's ``rotation_step`` and ``max_rotation_step`` with a
-        ``rotation_gain`` of 1, so that the turn is one whole step, as the
-        ``"iteration"`` estimate takes it (in ``"pose"`` mode a half Newton step after
-        the converged registration left 0.6 degree about the table's normal).
-    params : ServoParams
-        The servo's settings (``plane_turn_stride``, ``max_rotation_step``).
     """
 
+    core: PlaneTurn
     axis: np.ndarray
     centroid: np.ndarray
-    coefficients: np.ndarray
-    bandwidth: int
-    cos_cone: float
-    law: AlignParams
-    params: ServoParams
 
     @staticmethod
     def of(
         reference: PointCloud, centroid: np.ndarray, params: ServoParams, law: AlignParams
     ) -> _PlaneTurn | None:
-        """The turn's reference side from the reference's normals (the cloud as captured,
-        cropped), or None when the reference has no dominant plane."""
-        normals = np.asarray(reference.normals)
-        axis, share = dominant_normal(normals, params.plane.plane_cone)
-        cos_cone = math.cos(params.plane.plane_cone)
-        sampled = normals[:: params.plane.plane_turn_stride]
-        off = sampled[sampled @ axis <= cos_cone]
-        if share < params.plane.min_plane_share or len(off) < _MIN_OFF_PLANE:
+        """The turn's reference side from the reference (the cloud as captured, cropped),
+        or None when the reference has no dominant plane. The turn steps by the
+        registration's ``rotation_step`` and ``max_rotation_step`` with a gain of 1, so
+        that it is one whole step, as the ``"iteration"`` estimate takes it (in ``"pose"``
+        mode a half Newton step after the converged registration left 0.6 degree about
+        the table's normal)."""
+        plane = params.plane
+        core = PlaneTurn.of(
+            reference,
+            plane_cone=plane.plane_cone,
+            min_plane_share=plane.min_plane_share,
+            stride=plane.plane_turn_stride,
+            bandwidth=params.registration.bandwidth,
+            fine_bandwidth=plane.plane_turn_bandwidth,
+            max_tilt=plane.plane_turn_tilt,
+            law=law,
+        )
+        if core is None:
             return None
-        bandwidth = max(params.plane.plane_turn_bandwidth, params.registration.bandwidth)
-        coefficients = np.asarray(egi_coefficients(off, bandwidth))
-        law = copy.copy(law)
-        law.rotation_gain = 1.0
-        return _PlaneTurn(axis, centroid, coefficients, bandwidth, cos_cone, law, params)
+        return _PlaneTurn(core, np.asarray(core.axis, dtype=float), np.asarray(centroid))
 
-    def turn(self, normals: np.ndarray, T_scene_model: np.ndarray) -> float:
+    def turn(self, current: PointCloud, T_scene_model: np.ndarray) -> float:
         """The turn about ``axis`` (rad, right-multiplied: ``R exp(turn axis)``) that ascends
         the correlation of the off-plane EGIs from the estimate ``T_scene_model``, given the
-        current cloud's normals (as captured, cropped); 0 when the current view shows too
-        few normals off its plane, or when its plane's normal (the mean of its normals
-        within ``plane_cone`` of where the estimate puts it) is more than
-        ``plane_turn_tilt`` away from there.
-
-        Coarse to fine: the step at the registration's bandwidth (a Newton step where the
-        correlation is concave along the axis, else the gradient law, at most
-        ``max_rotation_step``); where that is an uncapped Newton step and the correlation at
-        ``plane_turn_bandwidth`` is concave too, its Newton step instead, if also under the
-        cap. The wide low-bandwidth peak reaches far; the sharp one is exact near the goal.
-        """
-        R = T_scene_model[:3, :3]
-        expected = R @ self.axis  # where the estimate puts the plane's normal in the view
-        sampled = normals[:: self.params.plane.plane_turn_stride]
-        off = sampled[sampled @ expected <= self.cos_cone]
-        if len(off) < _MIN_OFF_PLANE or len(off) == len(sampled):
-            return 0.0
-        plane = np.ones(len(sampled)) @ sampled - off.sum(axis=0)  # sum of the in-cone normals
-        if plane @ expected < math.cos(self.params.plane.plane_turn_tilt) * np.linalg.norm(plane):
-            return 0.0  # the tilt is still off: the turn would be measured about a wrong axis
-        fine = egi_coefficients(off, self.bandwidth)
-        coarse_count = self.params.registration.bandwidth**2  # degrees < B come first
-        coarse = self._step(fine[:coarse_count], self.coefficients[:coarse_count], R)
-        if not coarse.newton or coarse.capped:
-            return coarse.turn
-        if self.bandwidth > self.params.registration.bandwidth:
-            sharp = self._step(fine, self.coefficients, R)
-            if sharp.newton and not sharp.capped:
-                return sharp.turn
-        return coarse.turn
-
-    def _step(
-        self, scene_coefficients: np.ndarray, model_coefficients: np.ndarray, R: np.ndarray
-    ) -> AxisRotationStep:
-        """The registration's rotation law along ``axis`` at ``R`` (in the core)."""
-        correlation = So3Correlation(scene_coefficients, model_coefficients)
-        return rotation_step_about(correlation, R, self.axis, self.law)
+        current view (with normals, as captured): :meth:`spectral_vs._core.PlaneTurn.turn`."""
+        return float(self.core.turn(current, T_scene_model))
 
     def turned(self, T_scene_model: np.ndarray, turn: float) -> np.ndarray:
         """``T_scene_model`` with its rotation turned by ``turn`` about ``axis`` around the

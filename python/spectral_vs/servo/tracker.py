@@ -62,8 +62,7 @@ class Tracker:
         from the normals of ``cloud`` (those of its downsampled ``scene`` without)."""
         self.last_turn = 0.0
         if self.plane_turn is not None:
-            normals = np.asarray((cloud if cloud.has_normals else scene).normals)
-            self.last_turn = self.plane_turn.turn(normals, T)
+            self.last_turn = self.plane_turn.turn(cloud if cloud.has_normals else scene, T)
             T = self.plane_turn.turned(T, self.last_turn)
         return T
 
