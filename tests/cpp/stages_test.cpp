@@ -1,0 +1,148 @@
+// align()'s stages on their own (stages.hpp), each against a known truth rather than
+// through align(): the hypotheses of the global search, Algorithm 1 from one hypothesis,
+// and the model's near-symmetries the alternatives start from.
+
+#include "alignment/alternatives.hpp"
+#include "alignment/hypotheses.hpp"
+#include "alignment/prepared.hpp"
+#include "alignment/refinement.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+namespace spectral_vs::detail {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+double angle_deg(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle() / kDeg; }
+
+Eigen::Matrix3d about(const Eigen::Vector3d& axis, double degrees) {
+  return Eigen::AngleAxisd(degrees * kDeg, axis.normalized()).toRotationMatrix();
+}
+
+// The box with a sphere beside it (no symmetry), and a second sample of it moved by a
+// known pose with 0.5 mm of noise: the scene.
+struct MovedObject {
+  PointCloud model, scene;
+  Transform T_scene_model = Transform::Identity();
+  AlignParams params;
+
+  explicit MovedObject(unsigned seed) {
+    std::mt19937 rng(seed);
+    model = test::box_and_sphere(6000, rng);
+    const PointCloud other = test::box_and_sphere(6000, rng);
+    T_scene_model.topLeftCorner<3, 3>() = about({1.0, 2.0, 3.0}, 70.0);
+    T_scene_model.topRightCorner<3, 1>() << 0.3, -0.1, 0.2;
+    const Eigen::Matrix3d R = T_scene_model.topLeftCorner<3, 3>();
+    std::normal_distribution<double> noise(0.0, 0.0005);
+    Points points = (other.points() * R.transpose()).rowwise() +
+                    T_scene_model.topRightCorner<3, 1>().transpose();
+    for (Eigen::Index i = 0; i < points.size(); ++i) points.data()[i] += noise(rng);
+    scene = PointCloud(points, other.normals() * R.transpose());
+    params.scene.voxel_size = 0.008;
+  }
+
+  // Rotation (degrees) and centroid (metres) of a pose off the truth.
+  std::pair<double, double> error(const Transform& T) const {
+    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+    const Eigen::Matrix3d R_true = T_scene_model.topLeftCorner<3, 3>();
+    const Eigen::Vector3d c = model.centroid();
+    const Eigen::Vector3d moved = R * c + T.topRightCorner<3, 1>();
+    const Eigen::Vector3d truth = R_true * c + T_scene_model.topRightCorner<3, 1>();
+    return {angle_deg(R.transpose() * R_true), (moved - truth).norm()};
+  }
+};
+
+// What align() builds before its stages (aligner.cpp, align_globally).
+struct Stages {
+  explicit Stages(const MovedObject& o)
+      : moving(o.model),
+        prepared(o.model, o.scene, o.params, moving),
+        search_voxel(search_voxel_size(o.scene, moving.reach(), o.params)),
+        problem(prepared.problem(moving, o.params, window_margin(search_voxel, o.params),
+                                 Clock::time_point::max(),
+                                 flat_axis(prepared.model_coefficients, o.params.scene.bandwidth),
+                                 dense_for_polish(o.model.points(), o.params.scene.voxel_size))) {}
+
+  ScoredModel moving;
+  Prepared prepared;
+  double search_voxel;
+  Problem problem;
+};
+
+TEST(Hypotheses, TheFittestIsTheTruePoseWithinTheSearchGrid) {
+  for (const unsigned seed : {1u, 2u}) {
+    const MovedObject object(seed);
+    Stages stages(object);
+    const std::vector<Hypothesis> hypotheses =
+        global_hypotheses(stages.problem, stages.prepared.correlation,
+                          stages.prepared.scene_coefficients, stages.search_voxel);
+    ASSERT_FALSE(hypotheses.empty());
+    EXPECT_LE(int(hypotheses.size()), object.params.search.hypotheses);
+    for (std::size_t i = 1; i < hypotheses.size(); ++i)
+      EXPECT_GE(hypotheses[i - 1].fitness, hypotheses[i].fitness) << "ranked fittest first";
+    // The grid's nodes are pi / B = 11 degrees apart, refined on the EGI correlation; the
+    // placement is on a grid of search voxels (16 mm).
+    const auto [degrees, metres] =
+        object.error(stages.moving.transform_of(hypotheses.front().pose));
+    EXPECT_LT(degrees, 5.0) << "seed " << seed;
+    EXPECT_LT(metres, 2.0 * stages.search_voxel) << "seed " << seed;
+  }
+}
+
+TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
+  const MovedObject object(3);
+  Stages stages(object);
+  std::mt19937 rng(4);
+  std::normal_distribution<double> gaussian;
+  std::optional<TranslationWindow> window;
+  for (int trial = 0; trial < 3; ++trial) {
+    const Eigen::Vector3d axis(gaussian(rng), gaussian(rng), gaussian(rng));
+    Transform start = object.T_scene_model;
+    start.topLeftCorner<3, 3>() = about(axis, 8.0) * start.topLeftCorner<3, 3>();
+    start.topRightCorner<3, 1>() += Eigen::Vector3d(0.006, -0.004, 0.005);
+    Hypothesis hypothesis;
+    hypothesis.pose = stages.moving.pose_of(start);
+    hypothesis.fitness = stages.moving.fitness(stages.prepared.verifier, hypothesis.pose,
+                                               object.params.scene.voxel_size);
+    const AlignResult result =
+        refine_hypothesis(stages.problem, stages.prepared.correlation,
+                          stages.prepared.scene_coefficients, hypothesis, window);
+    const auto [degrees, metres] = object.error(result.T_scene_model);
+    EXPECT_LT(degrees, 1.0) << "trial " << trial;
+    EXPECT_LT(metres, 0.002) << "trial " << trial;
+    EXPECT_GT(result.fitness, hypothesis.fitness) << "trial " << trial;
+  }
+}
+
+// A box's EGI: six normals weighted by their faces' areas, three different ones. It maps
+// onto itself by the half turns about the three axes (correlation 1, the highest): the
+// first three of the near-symmetries, which go on with the lower maxima.
+TEST(Symmetries, OfABoxBeginWithItsThreeHalfTurns) {
+  std::mt19937 rng(5);
+  const Eigen::Vector3d half(0.12, 0.06, 0.04);
+  const Eigen::Vector3d areas(half.y() * half.z(), half.x() * half.z(), half.x() * half.y());
+  std::discrete_distribution<int> face({areas.x(), areas.y(), areas.z()});
+  std::bernoulli_distribution sign;
+  Points normals = Points::Zero(4000, 3);
+  for (Eigen::Index i = 0; i < normals.rows(); ++i) normals(i, face(rng)) = sign(rng) ? 1.0 : -1.0;
+  const int bandwidth = 16;
+  const std::vector<Eigen::Matrix3d> symmetries =
+      model_symmetries(egi_coefficients(normals, bandwidth), bandwidth, 1);
+  ASSERT_GE(symmetries.size(), 3u);
+  for (int axis = 0; axis < 3; ++axis) {
+    const Eigen::Matrix3d half_turn = about(Eigen::Matrix3d::Identity().col(axis), 180.0);
+    double nearest = 180.0;
+    for (std::size_t i = 0; i < 3; ++i)
+      nearest = std::min(nearest, angle_deg(symmetries[i].transpose() * half_turn));
+    EXPECT_LT(nearest, 2.0) << "the half turn about axis " << axis;
+  }
+}
+
+}  // namespace
+}  // namespace spectral_vs::detail
