@@ -172,6 +172,11 @@ guess_distance : float
     The largest distance of the model's centroid from where initial_guess puts it,
     metres (default 0: no limit). With either limit the guess is always refined and only
     hypotheses inside both are kept.
+max_parts : int
+    The connected parts of a cluttered scene (above its support plane) searched, at
+    most, largest first (default 8, >= 1); the search's time grows about linearly with
+    them. Raise it for a scene of many objects (a room): with 13 or more objects on a
+    table the default may leave the object out, and the answer is doubtful.
 )doc");
   define_settings(search)
       .def_readwrite("global_search", &GlobalSearchParams::global_search)
@@ -180,7 +185,8 @@ guess_distance : float
       .def_readwrite("search_voxel_size", &GlobalSearchParams::search_voxel_size)
       .def_readwrite("window_margin", &GlobalSearchParams::window_margin)
       .def_readwrite("guess_angle_deg", &GlobalSearchParams::guess_angle_deg)
-      .def_readwrite("guess_distance", &GlobalSearchParams::guess_distance);
+      .def_readwrite("guess_distance", &GlobalSearchParams::guess_distance)
+      .def_readwrite("max_parts", &GlobalSearchParams::max_parts);
 
   py::class_<RefinementParams> refinement(m, "RefinementParams", R"doc(
 The refinement of the global search's hypotheses: ``AlignParams.refinement``, read after

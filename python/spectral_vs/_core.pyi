@@ -459,6 +459,7 @@ class GlobalSearchParams:
         window_margin: float = ...,
         guess_angle_deg: float = ...,
         guess_distance: float = ...,
+        max_parts: int = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
@@ -471,6 +472,7 @@ class GlobalSearchParams:
     window_margin: float  # metres, 0: automatic
     guess_angle_deg: float  # degrees, 0: no limit
     guess_distance: float  # metres, 0: no limit
+    max_parts: int  # >= 1
 
 class RefinementParams:
     """The refinement of the search's hypotheses (AlignParams.refinement)."""
@@ -541,6 +543,7 @@ class AlignParams:
         window_margin: float = ...,
         guess_angle_deg: float = ...,
         guess_distance: float = ...,
+        max_parts: int = ...,
         refinement: RefinementParams = ...,
         refinement_iterations: int = ...,
         polish: bool = ...,
@@ -605,6 +608,7 @@ class AlignParams:
     window_margin: float  # metres, 0: automatic
     guess_angle_deg: float  # degrees, 0: no limit
     guess_distance: float  # metres, 0: no limit
+    max_parts: int  # >= 1
     refinement_iterations: int
     polish: bool
     icp_refinement: bool

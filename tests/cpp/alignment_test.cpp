@@ -135,6 +135,9 @@ TEST(Align, RefusesBadInput) {
   params.local.tolerance = NAN;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};
+  params.search.max_parts = 0;
+  EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
+  params = AlignParams{};
   params.initial_guess(3, 0) = 1.0;
   EXPECT_THROW(align(c.model, c.scene, params), std::invalid_argument);
   params = AlignParams{};

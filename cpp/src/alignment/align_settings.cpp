@@ -53,6 +53,7 @@ void check(const GlobalSearchParams& p) {
   if (!(p.guess_angle_deg >= 0.0 && p.guess_angle_deg <= 180.0)) {
     fail("guess_angle_deg must be in [0, 180] degrees (0: no limit), got ", p.guess_angle_deg);
   }
+  if (p.max_parts < 1) fail("max_parts must be >= 1, got ", p.max_parts);
   if (!(p.guess_distance >= 0.0 && std::isfinite(p.guess_distance))) {
     fail("guess_distance must be >= 0 metres (0: no limit), got ", p.guess_distance);
   }

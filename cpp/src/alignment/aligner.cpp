@@ -75,7 +75,7 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
   std::vector<std::vector<Eigen::Index>> parts;
   if (prepared.plane) {
     parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(),
-                         params.scene.voxel_size, prepared.band);
+                         params.scene.voxel_size, prepared.band, params.search.max_parts);
     keep_parts_near_guess(problem, prepared.searched, parts);
   } else if (prepared.viewpoint) {
     parts.push_back(whole_view(prepared.searched));

@@ -144,8 +144,8 @@ bool rest_on_support(const Problem& problem, Prepared& prepared, const PointClou
   std::vector<Transform> candidates;
   for (const AlignAlternative& alternative : best.alternatives)
     candidates.push_back(alternative.T_scene_model);
-  const auto parts =
-      object_parts(prepared.searched, prepared.plane, problem.model.reach(), voxel, prepared.band);
+  const auto parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(), voxel,
+                                  prepared.band, problem.params.search.max_parts);
   for (const Transform& T :
        resting_poses(problem, prepared.searched, parts, *prepared.plane, kRestingPerPart))
     candidates.push_back(T);

@@ -16,7 +16,6 @@ namespace detail {
 // shows: at least kPartMinPoints points, no smaller than a quarter of the model's reach
 // and no larger than two of its diameters (two objects touching).
 constexpr std::size_t kPartMinPoints = 30;
-constexpr std::size_t kMaxParts = 8;
 
 // The support plane's band: kPlaneBand voxels, or kThinBand of the model's thickness
 // (its extent along its thinnest principal axis) if that is less, but no less than
@@ -53,7 +52,7 @@ std::vector<Eigen::Index> rows_above(const PointCloud& searched,
 
 std::vector<std::vector<Eigen::Index>> object_parts(
     const PointCloud& searched, const std::optional<detail::SupportPlane>& plane, double reach,
-    double voxel_size, double band) {
+    double voxel_size, double band, int max_parts) {
   std::vector<Eigen::Index> above = rows_above(searched, plane, band);
   const Points points = detail::rows_of(searched.points(), above);
   const auto plausible = [&](const std::vector<Eigen::Index>& part) {
@@ -64,7 +63,7 @@ std::vector<std::vector<Eigen::Index>> object_parts(
   };
   std::vector<std::vector<Eigen::Index>> kept;
   for (auto& part : detail::connected_parts(points, kPartTolerance * voxel_size)) {
-    if (part.size() < kPartMinPoints || kept.size() == kMaxParts) break;
+    if (part.size() < kPartMinPoints || kept.size() == std::size_t(max_parts)) break;
     for (Eigen::Index& i : part) i = above[std::size_t(i)];
     if (plausible(part)) kept.push_back(std::move(part));
   }

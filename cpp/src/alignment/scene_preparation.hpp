@@ -28,10 +28,12 @@ std::vector<Eigen::Index> rows_above(const PointCloud& searched,
 
 /// The connected parts of `searched` (more than `band` above the support plane, when there
 /// is one) that could be the object: sizes between a quarter of the model's reach and two
-/// of its diameters, at most a few, largest first; a view cut in parts also as a whole.
+/// of its diameters, at most `max_parts` (GlobalSearchParams::max_parts), largest first; a
+/// view cut in parts also as a whole.
 std::vector<std::vector<Eigen::Index>> object_parts(const PointCloud& searched,
                                                     const std::optional<SupportPlane>& plane,
-                                                    double reach, double voxel_size, double band);
+                                                    double reach, double voxel_size, double band,
+                                                    int max_parts);
 
 /// The whole of a single view as the one part (no support plane to cut it).
 std::vector<Eigen::Index> whole_view(const PointCloud& searched);

@@ -134,6 +134,12 @@ struct GlobalSearchParams {
   /// is searched, metres, >= 0; 0: no limit. With a limit, the parts of a cluttered scene
   /// farther than this plus the model's reach are not searched.
   double guess_distance = 0.0;
+  /// The connected parts of a cluttered scene (above its support plane) that are searched,
+  /// at most, >= 1: the largest plausible ones (by points) first. The search's time grows
+  /// about linearly with them. 8 holds every part of every tuning scene (4-6 objects);
+  /// on a synthetic table of 13 or more objects (benchmarks/cost_growth.py, "extent")
+  /// the object was among the parts left out, and the answer doubtful.
+  int max_parts = 8;
 };
 
 /// The refinement of the global search's hypotheses (`AlignParams::refinement`): Algorithm
