@@ -326,6 +326,7 @@ def _value(sweep: str, value: float) -> str:
 
 def figure(results: dict[str, Any]) -> Path:
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -340,6 +341,10 @@ def figure(results: dict[str, Any]) -> Path:
             style = {"lw": 2.5, "color": "k"} if method == "ours" else {"lw": 1.2}
             ax.loglog([c["value"] for c in chosen], [c["cpu_s"] for c in chosen], "o-",
                       label=TITLES[method], ms=3, **style)  # fmt: skip
+        if sweep != "points":  # a few plain values, not powers of ten
+            values = sorted({c["value"] for c in all_cells if c["sweep"] == sweep})
+            ax.set_xticks(values, [f"{v:g}" for v in values])
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel(UNITS[sweep])
         ax.grid(alpha=0.3, which="both")
         ax.set_title(sweep.replace("_", " "))
