@@ -58,19 +58,6 @@ void check_params(const ViewAlignParams& p) {
   if (p.threads < 1 || p.threads > 256) fail("threads must be in [1, 256], got ", p.threads);
 }
 
-// The settings of align() that Algorithm 1 and the phase correlation read.
-AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
-  AlignParams a;
-  a.scene.voxel_size = scale.voxel_size;
-  a.scene.bandwidth = p.bandwidth;
-  a.threads = p.threads;
-  a.scene.occupancy = p.occupancy;
-  a.scene.egi_method = p.egi_method;
-  a.limits = p.limits;
-  a.max_seconds = p.max_seconds;
-  return a;
-}
-
 // The scale of view_scale, or the settings' where given.
 ViewScale scale_of(const PointCloud& reference, const PointCloud& current,
                    const ViewAlignParams& params) {
@@ -112,47 +99,10 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
   if (prior) require_rigid_transform(*prior, "prior");
   const Clock::time_point started = Clock::now();
   const ViewScale scale = scale_of(reference_view, current_view, params);
-  const AlignParams loop = loop_params(params, scale);
-
-  // Stage: preparation.
-  const PointCloud reference = prepared(reference_view, params, scale.voxel_size);
-  const PointCloud current = prepared(current_view, params, scale.voxel_size);
-  const PlaneBalance reference_balance = plane_balance(reference.normals());
-  const PointCloud reference_balanced = cropped(balanced(reference, reference_balance));
-  const PointCloud current_balanced = cropped(balanced(current, plane_balance(current.normals())));
-  detail::MovingModel model(reference_balanced);
-  const detail::SceneMap map(current_balanced);
-  const ShCoefficients reference_coefficients =
-      egi_coefficients(reference_balanced, params.bandwidth, params.egi_method);
-  const ShCoefficients current_coefficients =
-      egi_coefficients(current_balanced, params.bandwidth, params.egi_method);
-  So3Correlation correlation(current_coefficients, reference_coefficients, params.bandwidth, true);
-  const detail::Verifier verifier(current, scale.voxel_size, params.sensor_origin);
-  SupportCheck support(verifier, structure(reference, reference_balance));
-  // The ICP's neighbour grids, made once: cells as wide as the pairs' distance (wider
-  // cells hold more points to try per query), the hypotheses' on the view at a voxel.
-  Eigen::AlignedBox3d around = bounding_box(current);
-  around.min().array() -= 2.0 * scale.search_voxel_size;
-  around.max().array() += 2.0 * scale.search_voxel_size;
-  const PointCloud current_coarse = voxel_downsample(current, scale.voxel_size);
-  const detail::IcpScene coarse_scene(current_coarse, around, scale.search_voxel_size);
-  const detail::IcpScene fine_scene(current, around, scale.voxel_size);
-  const Views views{reference,
-                    current,
-                    params,
-                    loop,
-                    scale,
-                    model,
-                    reference_balanced,
-                    map,
-                    reference_coefficients,
-                    current_coefficients,
-                    correlation,
-                    verifier,
-                    support,
-                    coarse_scene,
-                    fine_scene,
-                    detail::deadline_of(loop, started)};
+  PreparedViews prepared(reference_view, current_view, params, scale, started);
+  const Views views = prepared.views();
+  detail::MovingModel& model = views.model;
+  SupportCheck& support = views.support;
 
   const std::vector<Hypothesis> ranked = hypotheses(views);
   std::optional<ViewAlignResult> kept;
@@ -183,7 +133,8 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
   best.scale = scale;
   best.windows = windows_checked;
   best.correlation =
-      correlation.evaluate(Eigen::Matrix3d(best.T_current_reference.topLeftCorner<3, 3>())).value;
+      views.correlation.evaluate(Eigen::Matrix3d(best.T_current_reference.topLeftCorner<3, 3>()))
+          .value;
   for (const Hypothesis& h : checked) {
     best.hypotheses.emplace_back(model.transform_of(h.pose), h.support);
   }

@@ -1,9 +1,12 @@
 // Stage of align_views(): preparation. Each view's dominant plane (a table top, a floor)
-// weighed down, the crop of its spatial outliers, and its structure off the plane.
+// weighed down, the crop of its spatial outliers, and its structure off the plane; the
+// views as every later stage reads them (PreparedViews).
 
 #include <spectral_vs/representation/dominant_plane.hpp>
 #include <spectral_vs/representation/preprocessing.hpp>
+#include <spectral_vs/rotation/egi_coefficients.hpp>
 
+#include "alignment/align_detail.hpp"
 #include "alignment/normal_directions.hpp"
 #include "alignment/point_sets.hpp"
 #include "alignment/view_stages.hpp"
@@ -137,6 +140,75 @@ PointCloud structure(const PointCloud& view, const PlaneBalance& balance) {
 
 PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, double voxel_size) {
   return params.downsample ? voxel_downsample(view, 0.5 * voxel_size) : view;
+}
+
+AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
+  AlignParams a;
+  a.scene.voxel_size = scale.voxel_size;
+  a.scene.bandwidth = p.bandwidth;
+  a.threads = p.threads;
+  a.scene.occupancy = p.occupancy;
+  a.scene.egi_method = p.egi_method;
+  a.limits = p.limits;
+  a.max_seconds = p.max_seconds;
+  return a;
+}
+
+namespace {
+
+// The box of the current view grown by two search voxels: the ICP's grids' extent.
+Eigen::AlignedBox3d icp_box(const PointCloud& current, const ViewScale& scale) {
+  Eigen::AlignedBox3d around = bounding_box(current);
+  around.min().array() -= 2.0 * scale.search_voxel_size;
+  around.max().array() += 2.0 * scale.search_voxel_size;
+  return around;
+}
+
+}  // namespace
+
+PreparedViews::PreparedViews(const PointCloud& reference_view, const PointCloud& current_view,
+                             const ViewAlignParams& params, const ViewScale& scale,
+                             Clock::time_point started)
+    : params_(params),
+      scale_(scale),
+      loop_(loop_params(params, scale)),
+      reference_(prepared(reference_view, params, scale.voxel_size)),
+      current_(prepared(current_view, params, scale.voxel_size)),
+      reference_balance_(plane_balance(reference_.normals())),
+      reference_balanced_(cropped(balanced(reference_, reference_balance_))),
+      current_balanced_(cropped(balanced(current_, plane_balance(current_.normals())))),
+      model_(reference_balanced_),
+      map_(current_balanced_),
+      reference_coefficients_(
+          egi_coefficients(reference_balanced_, params.bandwidth, params.egi_method)),
+      current_coefficients_(
+          egi_coefficients(current_balanced_, params.bandwidth, params.egi_method)),
+      correlation_(current_coefficients_, reference_coefficients_, params.bandwidth, true),
+      verifier_(current_, scale.voxel_size, params.sensor_origin),
+      support_(verifier_, structure(reference_, reference_balance_)),
+      around_(icp_box(current_, scale)),
+      current_coarse_(voxel_downsample(current_, scale.voxel_size)),
+      coarse_scene_(current_coarse_, around_, scale.search_voxel_size),
+      fine_scene_(current_, around_, scale.voxel_size),
+      deadline_(detail::deadline_of(loop_, started)) {}
+
+Views PreparedViews::views() {
+  return Views{reference_,
+               current_,
+               params_,
+               loop_,
+               scale_,
+               model_,
+               reference_balanced_,
+               map_,
+               reference_coefficients_,
+               current_coefficients_,
+               correlation_,
+               verifier_,
+               support_,
+               coarse_scene_,
+               fine_scene_,
+               deadline_};
 }
 
 }  // namespace spectral_vs::detail::views

@@ -125,6 +125,41 @@ struct Views {
 
 inline bool expired(const Views& views) { return Clock::now() > views.deadline; }
 
+/// The settings of align()'s Algorithm 1 and phase correlation at the views' scale.
+AlignParams loop_params(const ViewAlignParams& params, const ViewScale& scale);
+
+// Stage: preparation, whole (view_preparation.cpp): the two views as every later stage
+// reads them, made once per call; views() refers to its members.
+class PreparedViews {
+ public:
+  PreparedViews(const PointCloud& reference_view, const PointCloud& current_view,
+                const ViewAlignParams& params, const ViewScale& scale, Clock::time_point started);
+  PreparedViews(const PreparedViews&) = delete;
+  PreparedViews& operator=(const PreparedViews&) = delete;
+
+  Views views();
+
+ private:
+  const ViewAlignParams& params_;
+  const ViewScale scale_;
+  const AlignParams loop_;
+  const PointCloud reference_, current_;
+  const PlaneBalance reference_balance_;
+  const PointCloud reference_balanced_, current_balanced_;
+  detail::MovingModel model_;
+  const detail::SceneMap map_;
+  const ShCoefficients reference_coefficients_, current_coefficients_;
+  So3Correlation correlation_;
+  const detail::Verifier verifier_;
+  SupportCheck support_;
+  // The ICP's neighbour grids, made once: cells as wide as the pairs' distance (wider
+  // cells hold more points to try per query), the hypotheses' on the view at a voxel.
+  const Eigen::AlignedBox3d around_;
+  const PointCloud current_coarse_;
+  const detail::IcpScene coarse_scene_, fine_scene_;
+  const Clock::time_point deadline_;
+};
+
 // Best supported first; of equal scores, in their order.
 inline void sort_by_support(std::vector<Hypothesis>& hypotheses) {
   std::stable_sort(
