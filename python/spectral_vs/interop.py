@@ -21,16 +21,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from spectral_vs._core import PointCloud
+from spectral_vs.clouds import as_cloud, from_open3d, is_open3d_cloud
+
+__all__ = ["from_open3d", "is_open3d_cloud", "to_open3d"]
 
 _INSTALL = "pip install open3d (or the bench extra: pip install spectral_vs[bench])"
-
-
-def is_open3d_cloud(cloud: Any) -> bool:
-    """Whether ``cloud`` is an ``open3d.geometry.PointCloud`` (checked without importing
-    Open3D: an object of that class exists only if Open3D is imported already)."""
-    cls = type(cloud)
-    return cls.__name__ == "PointCloud" and cls.__module__.startswith("open3d")
 
 
 def _open3d() -> Any:
@@ -39,40 +34,6 @@ def _open3d() -> Any:
     except ImportError as error:
         raise ImportError(f"spectral_vs.to_open3d needs Open3D: {_INSTALL}") from error
     return open3d
-
-
-def from_open3d(cloud: Any, *, drop_non_finite: bool = True) -> PointCloud:
-    """A :class:`spectral_vs.PointCloud` with the points and normals of an Open3D cloud.
-
-    Parameters
-    ----------
-    cloud : open3d.geometry.PointCloud
-        Its ``points`` (metres) and, when it has them, its ``normals`` are copied (as
-        float64); its colours are not (``np.asarray(cloud.colors)`` has them).
-    drop_non_finite : bool
-        Drop points with a non-finite coordinate or normal, or a zero normal (what
-        :func:`spectral_vs.load_cloud` does with a file; Open3D keeps NaN points unless
-        told otherwise). False: such a point raises ``ValueError``.
-
-    Returns
-    -------
-    PointCloud
-
-    Raises
-    ------
-    TypeError
-        If ``cloud`` is not an ``open3d.geometry.PointCloud``.
-    ValueError
-        For non-finite points with ``drop_non_finite=False``.
-    """
-    if not is_open3d_cloud(cloud):
-        raise TypeError(
-            f"cloud must be an open3d.geometry.PointCloud, got {type(cloud).__module__}."
-            f"{type(cloud).__name__}"
-        )
-    points = np.asarray(cloud.points, dtype=np.float64)
-    normals = np.asarray(cloud.normals, dtype=np.float64) if cloud.has_normals() else None
-    return PointCloud(points.reshape(-1, 3), normals, drop_non_finite=drop_non_finite)
 
 
 def to_open3d(cloud: Any, colors: npt.ArrayLike | None = None) -> Any:
@@ -97,8 +58,6 @@ def to_open3d(cloud: Any, colors: npt.ArrayLike | None = None) -> Any:
     ValueError
         For a cloud array of another shape, or colours that are not (N, 3) in [0, 1].
     """
-    from spectral_vs.registration import as_cloud
-
     source = as_cloud(cloud, "cloud")
     o3d = _open3d()
     out = o3d.geometry.PointCloud()

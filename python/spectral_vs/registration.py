@@ -19,69 +19,8 @@ from spectral_vs._core import (
     estimate_normals,
     voxel_downsample,
 )
-from spectral_vs.interop import from_open3d, is_open3d_cloud
-from spectral_vs.sanity import check_normal_columns, inside_bounding_box
-
-CloudLike = PointCloud | np.ndarray
-
-
-#: Rows of an (N, 6) array whose normal columns are checked when its non-finite rows are
-#: dropped (evenly strided): a depth sensor's raw buffer at every control step.
-_CHECKED_ROWS = 4096
-
-
-def as_cloud(cloud: CloudLike, argument: str, drop_non_finite: bool = False) -> PointCloud:
-    """A :class:`PointCloud` from a cloud, an Open3D cloud or an (N, 3) / (N, 6) array
-    (points, normals).
-
-    Parameters
-    ----------
-    cloud : PointCloud, open3d.geometry.PointCloud or ndarray
-        Returned as is; an Open3D cloud's points and normals (:func:`spectral_vs.from_open3d`,
-        non-finite points dropped); or an (N, 3) array of points or (N, 6) array of points
-        and normals, metres. The normals of an (N, 6) array must be unit vectors (lengths
-        within 10% of 1 are normalised); ``PointCloud(points, normals)`` is the explicit
-        form, which takes any non-zero lengths.
-    argument : str
-        Name of the argument, for the error message.
-    drop_non_finite : bool
-        Drop the rows of an array that hold a non-finite value (a depth sensor's invalid
-        returns) instead of refusing them; the normal columns are then checked on up to
-        4096 evenly spaced finite rows, cheap enough for every frame of a servo.
-
-    Returns
-    -------
-    PointCloud
-
-    Raises
-    ------
-    ValueError
-        If the array has another shape or non-finite entries, or if the last three columns
-        of an (N, 6) array are not unit normals (colours in [0, 1] or [0, 255]: the median
-        length off 1 by more than 10%, more than 10% of the rows so, or every column >= 0
-        with lengths off 1 by more than 1%), naming ``argument``.
-    """
-    if isinstance(cloud, PointCloud):
-        return cloud
-    if is_open3d_cloud(cloud):
-        return from_open3d(cloud)
-    array = np.asarray(cloud)
-    if array.ndim != 2 or array.shape[1] not in (3, 6):
-        raise ValueError(
-            f"{argument} must be a PointCloud or an (N, 3) / (N, 6) array (or an "
-            f"open3d.geometry.PointCloud), got shape {array.shape}"
-        )
-    if drop_non_finite and array.dtype.kind in "fiu":
-        if array.shape[1] == 3:
-            return PointCloud(array, drop_non_finite=True)
-        sample = array[:: max(1, len(array) // _CHECKED_ROWS)]
-        check_normal_columns(sample[np.isfinite(sample).all(axis=1), 3:], argument)
-        return PointCloud(array[:, :3], array[:, 3:], drop_non_finite=True)
-    if array.shape[1] == 6:
-        check_normal_columns(array[:, 3:], argument)
-        return PointCloud(array[:, :3], array[:, 3:])
-    return PointCloud(array)
-
+from spectral_vs.clouds import CloudLike, as_cloud
+from spectral_vs.sanity import inside_bounding_box
 
 #: Keywords removed in 0.3 (0.2's deprecated aliases) and what stands for each now.
 _REMOVED_KEYWORDS = {

@@ -20,7 +20,8 @@ from spectral_vs._core import (
     estimate_normals,
 )
 from spectral_vs._core import align_views as _align_views
-from spectral_vs.registration import CloudLike, as_cloud, check_viewpoint, with_overrides
+from spectral_vs.clouds import CloudLike, as_cloud
+from spectral_vs.registration import check_viewpoint, with_overrides
 from spectral_vs.sanity import InputWarning, inside_bounding_box
 
 #: Neighbours of an estimated normal's plane fit: a count, not a radius, because a depth

@@ -163,14 +163,14 @@ def test_unit_and_slightly_non_unit_normals_are_taken(object_and_view):
     _, scene, normals, _ = object_and_view
     rng = np.random.default_rng(2)
     scaled = normals * rng.uniform(0.9, 1.1, (len(normals), 1))
-    cloud = svs.registration.as_cloud(np.hstack([scene, scaled]), "scene")
+    cloud = svs.clouds.as_cloud(np.hstack([scene, scaled]), "scene")
     np.testing.assert_allclose(cloud.normals, normals, rtol=0, atol=1e-12)  # normalised
     # Unit normals all in one octant, all >= 0 (a plane facing +x +y +z), are normals.
     facing = np.tile(np.ones(3) / np.sqrt(3.0), (100, 1))
     plane = rng.uniform(-0.1, 0.1, (100, 3))
-    svs.registration.as_cloud(np.hstack([plane, facing]), "scene")
+    svs.clouds.as_cloud(np.hstack([plane, facing]), "scene")
     with pytest.raises(ValueError, match=r"^scene: .*all three columns are >= 0"):
-        svs.registration.as_cloud(np.hstack([plane, facing * 0.95]), "scene")
+        svs.clouds.as_cloud(np.hstack([plane, facing * 0.95]), "scene")
 
 
 # --- Sensor origin inside the cloud ------------------------------------------------------

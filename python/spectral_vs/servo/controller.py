@@ -9,8 +9,8 @@ import time
 import numpy as np
 
 from spectral_vs._core import AlignResult, PointCloud
+from spectral_vs.clouds import CloudLike, as_cloud
 from spectral_vs.poses import _pose, rotation_vector
-from spectral_vs.registration import CloudLike, as_cloud
 from spectral_vs.servo.estimate import TrackedEstimate
 from spectral_vs.servo.frames import Odometry
 from spectral_vs.servo.gate import FrameGate, checked_motion

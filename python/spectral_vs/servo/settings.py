@@ -138,7 +138,7 @@ class ServoParams:
         at the desired pose, camera frame, m): the settings a
         :class:`~spectral_vs.servo.SpectralServo` of that reference uses
         (:func:`spectral_vs.servo.scale.resolve_scale`)."""
-        from spectral_vs.registration import as_cloud
+        from spectral_vs.clouds import as_cloud
         from spectral_vs.servo.scale import resolve_scale
 
         return resolve_scale(self, as_cloud(reference, "reference"))[0]
