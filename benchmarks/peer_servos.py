@@ -35,8 +35,8 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from spectral_vs._core import PointCloud
+from spectral_vs.clouds import as_cloud
 from spectral_vs.poses import pose_error, rotation_matrix, rotation_vector
-from spectral_vs.registration import as_cloud
 from spectral_vs.servo.law import _saturated_twist
 from spectral_vs.servo.records import (
     ServoRecord,
