@@ -47,14 +47,8 @@ struct MovedObject {
     params.scene.voxel_size = 0.008;
   }
 
-  // Rotation (degrees) and centroid (metres) of a pose off the truth.
   std::pair<double, double> error(const Transform& T) const {
-    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
-    const Eigen::Matrix3d R_true = T_scene_model.topLeftCorner<3, 3>();
-    const Eigen::Vector3d c = model.centroid();
-    const Eigen::Vector3d moved = R * c + T.topRightCorner<3, 1>();
-    const Eigen::Vector3d truth = R_true * c + T_scene_model.topRightCorner<3, 1>();
-    return {angle_deg(R.transpose() * R_true), (moved - truth).norm()};
+    return test::pose_error(T, T_scene_model, model.centroid());
   }
 };
 

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <random>
 #include <string>
+#include <utility>
 
 namespace spectral_vs::test {
 
@@ -55,6 +56,16 @@ inline PointCloud thin_and_jitter(const PointCloud& cloud, double keep, double s
   }
   points.conservativeResize(n, Eigen::NoChange);
   return PointCloud(points);
+}
+
+/// How far `T` is from `T_true`: the rotation between them (degrees) and the distance
+/// between where they put `centre` (metres).
+inline std::pair<double, double> pose_error(const Transform& T, const Transform& T_true,
+                                            const Eigen::Vector3d& centre) {
+  const Eigen::Matrix3d R = T.topLeftCorner<3, 3>(), R_true = T_true.topLeftCorner<3, 3>();
+  const Eigen::Vector3d moved = R * centre + T.topRightCorner<3, 1>();
+  const Eigen::Vector3d truth = R_true * centre + T_true.topRightCorner<3, 1>();
+  return {Eigen::AngleAxisd(R.transpose() * R_true).angle() * 180.0 / M_PI, (moved - truth).norm()};
 }
 
 inline Transform translation(const Eigen::Vector3d& t) {

@@ -69,12 +69,7 @@ struct MovedView {
   }
 
   std::pair<double, double> error(const Transform& T) const {
-    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
-    const Eigen::Matrix3d R_true = T_current_reference.topLeftCorner<3, 3>();
-    const Eigen::Vector3d c = reference.centroid();
-    const Eigen::Vector3d moved = R * c + T.topRightCorner<3, 1>();
-    const Eigen::Vector3d truth = R_true * c + T_current_reference.topRightCorner<3, 1>();
-    return {Eigen::AngleAxisd(R.transpose() * R_true).angle() / kDeg, (moved - truth).norm()};
+    return test::pose_error(T, T_current_reference, reference.centroid());
   }
 };
 
