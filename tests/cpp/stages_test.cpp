@@ -94,7 +94,7 @@ TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
   Stages stages(object);
   std::mt19937 rng(4);
   std::normal_distribution<double> gaussian;
-  std::optional<TranslationWindow> window;
+  WindowCache windows;
   for (int trial = 0; trial < 3; ++trial) {
     const Eigen::Vector3d axis(gaussian(rng), gaussian(rng), gaussian(rng));
     Transform start = object.T_scene_model;
@@ -106,7 +106,7 @@ TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
                                                object.params.scene.voxel_size);
     const AlignResult result =
         refine_hypothesis(stages.problem, stages.prepared.correlation,
-                          stages.prepared.scene_coefficients, hypothesis, window);
+                          stages.prepared.scene_coefficients, hypothesis, windows);
     const auto [degrees, metres] = object.error(result.T_scene_model);
     EXPECT_LT(degrees, 1.0) << "trial " << trial;
     EXPECT_LT(metres, 0.002) << "trial " << trial;

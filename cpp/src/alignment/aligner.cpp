@@ -49,8 +49,8 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
           : SceneTranslation(prepared.scene_map, moving.centre(start), moving.reach(),
                              params.scene.voxel_size, params.scene.occupancy, phase_params(params),
                              params.limits);
-  std::optional<TranslationWindow> window;
-  SceneThenWindow source(problem, whole_scene, window);
+  WindowCache windows;
+  SceneThenWindow source(problem, whole_scene, windows);
   AlignResult result =
       algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
                               source, params.local.max_iterations);
@@ -69,8 +69,7 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
 // The second stage: hypotheses per part of the scene that could be the object, or over
 // the whole scene when it has no parts.
 std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared,
-                                      double search_voxel,
-                                      std::optional<TranslationWindow>& window) {
+                                      double search_voxel, WindowCache& windows) {
   const AlignParams& params = problem.params;
   std::vector<std::vector<Eigen::Index>> parts;
   if (prepared.plane) {
@@ -88,7 +87,7 @@ std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared
   } else {
     const int per_part =
         prepared.plane ? std::max(1, params.search.hypotheses / 2) : params.search.hypotheses;
-    hypotheses = part_hypotheses(problem, parts, per_part, prepared.plane.has_value(), window);
+    hypotheses = part_hypotheses(problem, parts, per_part, prepared.plane.has_value(), windows);
     seed_with_guess(problem, hypotheses, params.scene.voxel_size);
     turn_about_flat_axis(problem, hypotheses, params.scene.voxel_size);
   }
@@ -131,7 +130,7 @@ bool worth_refining(const Hypothesis& hypothesis, double best_fitness, const Ali
 // polished and through the ICP.
 AlignResult refine_best(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                         Prepared& prepared, const std::vector<const Hypothesis*>& refined,
-                        std::optional<TranslationWindow>& window) {
+                        WindowCache& windows) {
   const AlignParams& params = problem.params;
   AlignResult best;
   bool out_of_time = false;
@@ -140,12 +139,12 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
     if (i > 0 && !worth_refining(*refined[i], best.fitness, params)) continue;
     ++runs;
     AlignResult result = refine_hypothesis(problem, prepared.correlation,
-                                           prepared.scene_coefficients, *refined[i], window);
+                                           prepared.scene_coefficients, *refined[i], windows);
     // Fitness tells a mug upright from upside down only with its handle in place, and a
     // view's fitness a pose from its near-symmetric flip only at a precise pose: each
     // result is swept and refined before they are compared.
     if (params.refinement.polish && problem.flat_axis)
-      sweep_result_about(problem, window, result, *problem.flat_axis);
+      sweep_result_about(problem, windows, result, *problem.flat_axis);
     if (params.refinement.icp_refinement && prepared.viewpoint) {
       const StageTimer timer(problem.timings, &AlignTimings::icp);
       refine_with_icp(problem, model, scene, result);
@@ -162,7 +161,7 @@ AlignResult refine_best(const Problem& problem, const PointCloud& model, const P
   }
   // Without the ICP, which reaches past it at a fraction of its cost.
   if (params.refinement.polish && !params.refinement.icp_refinement)
-    polish_result_rotation(problem, window, best);
+    polish_result_rotation(problem, windows, best);
   if (params.refinement.icp_refinement) {
     const StageTimer timer(problem.timings, &AlignTimings::icp);
     refine_with_icp(problem, model, scene, best);
@@ -184,12 +183,13 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
       prepared.problem(moving, params, window_margin(search_voxel, params), deadline, axis, dense);
   timings.preparation += seconds_since(started);
   started = Clock::now();
-  std::optional<TranslationWindow> window;
-  const std::vector<Hypothesis> hypotheses = hypotheses_of(problem, prepared, search_voxel, window);
+  WindowCache windows;
+  const std::vector<Hypothesis> hypotheses =
+      hypotheses_of(problem, prepared, search_voxel, windows);
   timings.placement = seconds_since(started) - timings.rotation_search;
   started = Clock::now();
   AlignResult best =
-      refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), window);
+      refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), windows);
   timings.algorithm1 = seconds_since(started) - timings.icp;
   const StageTimer timer(&timings, &AlignTimings::alternatives);
   best.search_voxel_size = search_voxel;

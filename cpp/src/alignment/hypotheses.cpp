@@ -161,8 +161,7 @@ std::vector<Eigen::Matrix3d> part_rotations(const Problem& problem,
 // placed by phase correlation in a window around the part at the alignment's voxel.
 std::vector<Hypothesis> part_hypotheses(const Problem& problem,
                                         const std::vector<std::vector<Eigen::Index>>& parts,
-                                        int per_part, bool screen,
-                                        std::optional<TranslationWindow>& window) {
+                                        int per_part, bool screen, WindowCache& windows) {
   const AlignParams& params = problem.params;
   const PointCloud& scene = problem.scene.cloud();
   RotationRefineParams refine;
@@ -185,7 +184,7 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
     } catch (const std::invalid_argument&) {
       continue;  // a part whose normals have no structure
     }
-    place_window(problem, window, centroid);
+    TranslationWindow& window = windows.at(problem, centroid);
     if (coarse) {
       coarse->place(centroid);
     } else {
@@ -207,7 +206,7 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       kept.push_back(refined);
       // Twice: the coarse shift brings the model near enough for the fine one to be exact.
       hypothesis.pose = placed_at_part(problem, problem.model, refined, centroid, *coarse);
-      hypothesis.pose.offset += window->estimate(problem.model.move(hypothesis.pose)).shift;
+      hypothesis.pose.offset += window.estimate(problem.model.move(hypothesis.pose)).shift;
       hypothesis.fitness =
           problem.model.fitness(problem.verifier, hypothesis.pose, params.scene.voxel_size);
       hypotheses.push_back(hypothesis);

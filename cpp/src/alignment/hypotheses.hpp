@@ -29,8 +29,7 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
 /// are first placed coarsely on a sparse model and tried fittest first.
 std::vector<Hypothesis> part_hypotheses(const Problem& problem,
                                         const std::vector<std::vector<Eigen::Index>>& parts,
-                                        int per_part, bool screen,
-                                        std::optional<TranslationWindow>& window);
+                                        int per_part, bool screen, WindowCache& windows);
 
 /// The model at rotation R with its side facing the sensor at `centroid` (its centroid
 /// there, without a sensor): where a part's hypotheses start from.

@@ -137,14 +137,13 @@ Pose sweep_flat_axis(const Problem& problem, TranslationWindow& window, const Po
 // The pose of `result` moved by `step` (the flat-axis sweep or the pattern search) in a
 // window placed around it; left as it is for a model too sparse for the voxel overlap.
 template <typename Step>
-void polish_result(const Problem& problem, std::optional<TranslationWindow>& window,
-                   AlignResult& result, Step step) {
+void polish_result(const Problem& problem, WindowCache& windows, AlignResult& result, Step step) {
   const Pose start = problem.model.pose_of(result.T_scene_model);
   if (points_per_voxel(problem.model.move(start), problem.params.scene.voxel_size) <
       kPolishMinDensity)
     return;
-  place_window(problem, window, problem.model.centre(start));
-  const Pose polished = step(*window, start, result.polish_evaluations);
+  const Pose polished =
+      step(windows.at(problem, problem.model.centre(start)), start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
   result.fitness =
       problem.model.fitness(problem.verifier, polished, problem.params.scene.voxel_size);
@@ -152,15 +151,15 @@ void polish_result(const Problem& problem, std::optional<TranslationWindow>& win
 
 }  // namespace
 
-void place_window(const Problem& problem, std::optional<TranslationWindow>& window,
-                  const Eigen::Vector3d& centre) {
-  if (window) {
-    window->place(centre);
-    return;
+TranslationWindow& WindowCache::at(const Problem& problem, const Eigen::Vector3d& centre) {
+  if (window_) {
+    window_->place(centre);
+  } else {
+    window_.emplace(problem.scene, problem.model.reach(), problem.margin, centre,
+                    problem.params.scene.voxel_size, problem.params.scene.occupancy,
+                    phase_params(problem.params), problem.params.limits);
   }
-  window.emplace(problem.scene, problem.model.reach(), problem.margin, centre,
-                 problem.params.scene.voxel_size, problem.params.scene.occupancy,
-                 phase_params(problem.params), problem.params.limits);
+  return *window_;
 }
 
 AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& correlation,
@@ -175,8 +174,7 @@ AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& corr
 
 AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_correlation,
                               const ShCoefficients& scene_coefficients,
-                              const Hypothesis& hypothesis,
-                              std::optional<TranslationWindow>& window) {
+                              const Hypothesis& hypothesis, WindowCache& windows) {
   const double half_width = problem.model.reach() + problem.margin;
   const auto local = window_coefficients(problem.scene, problem.model.centre(hypothesis.pose),
                                          half_width, problem.params);
@@ -191,9 +189,9 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   }
   So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
   const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
-  place_window(problem, window, problem.model.centre(hypothesis.pose));
   AlignResult result =
-      algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose, *window,
+      algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose,
+                              windows.at(problem, problem.model.centre(hypothesis.pose)),
                               problem.params.refinement.refinement_iterations);
   result.hypothesis = hypothesis.index;
   // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
@@ -218,16 +216,15 @@ bool dense_for_polish(const Points& model_points, double voxel_size) {
   return points_per_voxel(model_points, voxel_size) >= kPolishMinDensity;
 }
 
-void sweep_result_about(const Problem& problem, std::optional<TranslationWindow>& window,
-                        AlignResult& result, const Eigen::Vector3d& axis) {
-  polish_result(problem, window, result, [&](TranslationWindow& w, const Pose& p, int& n) {
+void sweep_result_about(const Problem& problem, WindowCache& windows, AlignResult& result,
+                        const Eigen::Vector3d& axis) {
+  polish_result(problem, windows, result, [&](TranslationWindow& w, const Pose& p, int& n) {
     return sweep_flat_axis(problem, w, p, axis, n);
   });
 }
 
-void polish_result_rotation(const Problem& problem, std::optional<TranslationWindow>& window,
-                            AlignResult& result) {
-  polish_result(problem, window, result, [&](TranslationWindow& w, const Pose& p, int& n) {
+void polish_result_rotation(const Problem& problem, WindowCache& windows, AlignResult& result) {
+  polish_result(problem, windows, result, [&](TranslationWindow& w, const Pose& p, int& n) {
     return polish_pattern(problem, w, p, n);
   });
 }

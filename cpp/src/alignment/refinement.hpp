@@ -20,34 +20,32 @@ namespace spectral_vs::detail {
 // (max_translation) is kept throughout.
 class SceneThenWindow : public TranslationSource {
  public:
-  SceneThenWindow(const Problem& problem, SceneTranslation& scene,
-                  std::optional<TranslationWindow>& window)
-      : problem_(problem), scene_(scene), window_(window) {}
+  SceneThenWindow(const Problem& problem, SceneTranslation& scene, WindowCache& windows)
+      : problem_(problem), scene_(scene), windows_(windows) {}
 
   TranslationEstimate estimate(const Points& moved) override {
-    return on_window_ ? window_->estimate(moved) : scene_.estimate(moved);
+    return window_ ? window_->estimate(moved) : scene_.estimate(moved);
   }
   double translation_cost() const override {
-    return on_window_ ? window_->translation_cost() : scene_.translation_cost();
+    return window_ ? window_->translation_cost() : scene_.translation_cost();
   }
   void follow(const Eigen::Vector3d& centre, const Eigen::Vector3d& step, bool more) override {
-    if (on_window_) {
+    if (window_) {
       window_->follow(centre);
     } else if (problem_.params.local.max_translation == 0.0 && more &&
                step.norm() < 0.5 * problem_.margin) {
-      place_window(problem_, window_, centre);  // near: go local
-      on_window_ = true;
+      window_ = &windows_.at(problem_, centre);  // near: go local
     }
   }
   std::optional<Eigen::Vector3i> window_dims() const override {
-    return on_window_ ? std::optional<Eigen::Vector3i>(window_->dims()) : std::nullopt;
+    return window_ ? std::optional<Eigen::Vector3i>(window_->dims()) : std::nullopt;
   }
 
  private:
   const Problem& problem_;
   SceneTranslation& scene_;
-  std::optional<TranslationWindow>& window_;
-  bool on_window_ = false;
+  WindowCache& windows_;
+  TranslationWindow* window_ = nullptr;  // once the model is near
 };
 
 /// Algorithm 1 (eq. 16-17) from `pose` with the translation from `source`, and the
@@ -60,19 +58,17 @@ AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& corr
 /// scene inside that window; the hypothesis itself when it is fitter.
 AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_correlation,
                               const ShCoefficients& scene_coefficients,
-                              const Hypothesis& hypothesis,
-                              std::optional<TranslationWindow>& window);
+                              const Hypothesis& hypothesis, WindowCache& windows);
 
 /// The model is dense enough for the voxel overlap of the sweep and the polish.
 bool dense_for_polish(const Points& model_points, double voxel_size);
 
 /// The result turned to the best of its turns about the model's flat axis `axis`.
-void sweep_result_about(const Problem& problem, std::optional<TranslationWindow>& window,
-                        AlignResult& result, const Eigen::Vector3d& axis);
+void sweep_result_about(const Problem& problem, WindowCache& windows, AlignResult& result,
+                        const Eigen::Vector3d& axis);
 
 /// The result's rotation polished on the voxel overlap (a pattern search).
-void polish_result_rotation(const Problem& problem, std::optional<TranslationWindow>& window,
-                            AlignResult& result);
+void polish_result_rotation(const Problem& problem, WindowCache& windows, AlignResult& result);
 
 /// The ICP refinement of a result (AlignParams::refinement.icp_refinement, or
 /// LocalParams::icp when `local`: local_icp_settings), against the whole scene; kept

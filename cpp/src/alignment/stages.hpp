@@ -109,9 +109,16 @@ bool has_neighbourhood(const GlobalSearchParams& search);
 /// voxels), metres.
 double window_margin(double search_voxel, const AlignParams& params);
 
-/// Places the translation window, made once (its FFT plans are re-used) and moved to
-/// each place Algorithm 1 runs.
-void place_window(const Problem& problem, std::optional<TranslationWindow>& window,
-                  const Eigen::Vector3d& centre);
+/// The translation window of one alignment, made at its first use and moved to each place
+/// a stage works at (a part's placement, Algorithm 1 from a hypothesis, the sweep, the
+/// polish), so that its FFT plans are made once: the cache the stages share.
+class WindowCache {
+ public:
+  /// The window, placed at `centre`.
+  TranslationWindow& at(const Problem& problem, const Eigen::Vector3d& centre);
+
+ private:
+  std::optional<TranslationWindow> window_;
+};
 
 }  // namespace spectral_vs::detail
