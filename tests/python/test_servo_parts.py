@@ -123,3 +123,26 @@ def test_the_plane_turn_refuses_settings_out_of_range_naming_them():
         svs._core.PlaneTurn.of(reference, stride=0)
     up = np.tile([0.0, 0.0, 1.0], (500, 1))
     assert svs._core.PlaneTurn.of(PointCloud(up, up)) is None  # no normal off the plane
+
+
+def test_the_servos_plane_settings_default_to_the_cores_plane_turn():
+    """The servo's ``plane`` group and the core's ``PlaneTurn.of`` state the same defaults
+    where they are the same setting (the servo passes every one of them; a C++ user gets
+    the core's)."""
+    import re
+
+    from spectral_vs.servo.stage_settings import PlaneTurnParams
+
+    signature = svs._core.PlaneTurn.of.__doc__.splitlines()[0]
+    core = {
+        name: float(value) for name, value in re.findall(r"(\w+): [^=,]+ = ([-+0-9.e]+)", signature)
+    }
+    plane = PlaneTurnParams()
+    assert core["plane_cone"] == plane.plane_cone
+    assert core["min_plane_share"] == plane.min_plane_share
+    assert core["stride"] == plane.plane_turn_stride
+    assert core["fine_bandwidth"] == plane.plane_turn_bandwidth
+    # The coarse step's bandwidth is the registration's: the servo passes its own (8); the
+    # core's default is align()'s (16).
+    assert core["bandwidth"] == svs.AlignParams().bandwidth
+    assert core["max_tilt"] == plane.plane_turn_tilt
