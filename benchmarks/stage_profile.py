@@ -9,6 +9,14 @@ side downsamples both clouds first. The call's CPU time is split into that Pytho
 between the ``stage_profile`` markers of docs/benchmarks.md::
 
     OMP_NUM_THREADS=1 python benchmarks/stage_profile.py [--cases-per-cell 3]
+
+With ``--views``, the same for ``align_views`` (``ViewAlignResult.timings``) on view pairs
+of the real scans (``spectral_vs.data.view_pairs``: the table and the room, 320 x 240 and
+640 x 480) and rendered pairs of the simulated iiwa (``data.sim_view_pairs``, large
+starts), each registered as a user calls it, with the current's sensor origin; written to
+``benchmarks/results/view_stage_profile.json`` and the ``view_stage_profile`` block::
+
+    OMP_NUM_THREADS=1 python benchmarks/stage_profile.py --views [--pairs 5]
 """
 
 from __future__ import annotations
@@ -43,6 +51,45 @@ def profile(case: case_lib.Case) -> dict:
     return row
 
 
+def profile_views(pair) -> dict:
+    """One align_views call's CPU time, split by stage, seconds."""
+    start = time.process_time()
+    result = svs.align_views(pair.reference, pair.current, sensor_origin=pair.current_viewpoint)
+    cpu = time.process_time() - start
+    stages = result.timings.as_dict()
+    row = {"python": max(0.0, cpu - stages.pop("total"))} | stages
+    row["cpu"] = cpu
+    row["reliable"] = bool(result.reliable)
+    return row
+
+
+#: The view-pair families: (label, scan or None for rendered pairs, downscale).
+VIEW_FAMILIES = (
+    ("table-320", "table", 2),
+    ("room-320", "room", 2),
+    ("sim-320", None, 1),
+    ("table-640", "table", 1),
+    ("room-640", "room", 1),
+)
+
+
+def run_views(pairs: int) -> dict[str, list[dict]]:
+    from spectral_vs import data
+    from spectral_vs.data.scans import scan_path
+
+    rows: dict[str, list[dict]] = {}
+    for label, scan, downscale in VIEW_FAMILIES:
+        if scan is None:
+            family = data.sim_view_pairs(pairs, start_set="large", seed=0)
+        else:
+            family = data.view_pairs(scan_path(scan), pairs, downscale=downscale, seed=0)
+        for i, pair in enumerate(family):
+            row = profile_views(pair) | {"case": f"{label}-{i}"}
+            rows.setdefault(label, []).append(row)
+            print(f"{label}-{i:<10d} {1000 * row['cpu']:8.1f} ms", flush=True)
+    return rows
+
+
 def run(families: tuple[str, ...], cases_per_cell: int) -> dict[str, list[dict]]:
     rows: dict[str, list[dict]] = {}
     for family in families:
@@ -68,7 +115,9 @@ def table(rows: dict[str, list[dict]]) -> str:
         means = {c: float(np.mean([r[c] for r in family_rows])) for c in columns}
         total = sum(means.values())
         cells = [f"{1000 * means[c]:.1f} ({100 * means[c] / total:.0f}%)" for c in columns]
-        label = f"{family} ({case_lib.CONDITIONS[family]})"
+        label = (
+            f"{family} ({case_lib.CONDITIONS[family]})" if family in case_lib.CONDITIONS else family
+        )
         lines.append(
             f"| {label} | {len(family_rows)} | {1000 * float(np.median(cpu)):.1f} | "
             + " | ".join(cells)
@@ -81,7 +130,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases-per-cell", type=int, default=3, help="cases per family and angle")
     parser.add_argument("--families", nargs="+", default=list(case_lib.FAMILIES))
+    parser.add_argument("--views", action="store_true", help="profile align_views instead")
+    parser.add_argument("--pairs", type=int, default=5, help="view pairs per family (--views)")
     args = parser.parse_args()
+    if args.views:
+        return main_views(args.pairs)
     rows = run(tuple(args.families), args.cases_per_cell)
     stamp = (
         f"Commit `{commit()}`, {machine()}, one thread, CPU time; "
@@ -96,6 +149,24 @@ def main() -> int:
     text = stamp + "\n\n" + table(rows)
     print(text)
     if replace_block(BENCHMARKS_DOC, "stage_profile", text):
+        print(f"wrote the table into {BENCHMARKS_DOC}")
+    return 0
+
+
+def main_views(pairs: int) -> int:
+    rows = run_views(pairs)
+    stamp = (
+        f"Commit `{commit()}`, {machine()}, one thread, CPU time; "
+        f"`OMP_NUM_THREADS=1 python benchmarks/stage_profile.py --views --pairs {pairs}`. "
+        "Per stage: the mean ms per call (its share of the call). `python`: the Python side "
+        "of `svs.align_views` (its checks of the inputs)."
+    )
+    (RESULTS / "view_stage_profile.json").write_text(
+        json.dumps({"stamp": stamp, "rows": rows}, indent=1) + "\n"
+    )
+    text = stamp + "\n\n" + table(rows)
+    print(text)
+    if replace_block(BENCHMARKS_DOC, "view_stage_profile", text):
         print(f"wrote the table into {BENCHMARKS_DOC}")
     return 0
 

@@ -191,6 +191,46 @@ the reference centroids of the two poses).
         return out.str();
       });
 
+  // The stages of ViewAlignTimings in the order align_views() runs them, then the total:
+  // one list for the attributes and as_dict().
+  struct TimingField {
+    const char* name;
+    double ViewAlignTimings::*member;
+    const char* doc;
+  };
+  static const TimingField kTimingFields[] = {
+      {"preparation", &ViewAlignTimings::preparation,
+       "The scale, the views downsampled and balanced, their EGIs and correlation, the "
+       "verification's depth image, the ICP's grids."},
+      {"hypotheses", &ViewAlignTimings::hypotheses,
+       "The SO(3) search, its rotations refined, placed by phase correlation, checked."},
+      {"refinement", &ViewAlignTimings::refinement,
+       "Algorithm 1 and the ICP from the prior and the best hypotheses."},
+      {"window_search", &ViewAlignTimings::window_search,
+       "The window search and its refinements (0: it did not run)."},
+      {"verdict", &ViewAlignTimings::verdict,
+       "The verification, the alternatives, the covariance, the verdict."},
+      {"total", &ViewAlignTimings::total, "The whole call."}};
+  py::class_<ViewAlignTimings> timings(m, "ViewAlignTimings",
+                                       "Where the time of one align_views() went, by stage, "
+                                       "seconds of the wall clock (with threads=1, its CPU time).");
+  for (const TimingField& field : kTimingFields)
+    timings.def_readonly(field.name, field.member, field.doc);
+  timings
+      .def(
+          "as_dict",
+          [](const ViewAlignTimings& t) {
+            py::dict d;
+            for (const TimingField& field : kTimingFields) d[field.name] = t.*field.member;
+            return d;
+          },
+          "The stages' seconds by name, in the order they run, and the total.")
+      .def("__repr__", [](const ViewAlignTimings& t) {
+        std::ostringstream out;
+        out << "ViewAlignTimings(total=" << t.total << ")";
+        return out.str();
+      });
+
   py::class_<ViewAlignResult>(m, "ViewAlignResult", R"doc(
 Outcome of ``align_views``.
 
@@ -248,6 +288,8 @@ windows : int
     Windows the window search checked (0: it did not run).
 hypotheses : list of (ndarray (4, 4), ViewSupport)
     Every checked hypothesis, best score first.
+timings : ViewAlignTimings
+    Where the time went, by stage.
 )doc")
       .def_property_readonly(
           "T_current_reference",
@@ -275,6 +317,7 @@ hypotheses : list of (ndarray (4, 4), ViewSupport)
       .def_readonly("icp_iterations", &ViewAlignResult::icp_iterations)
       .def_readonly("windows", &ViewAlignResult::windows)
       .def_readonly("hypotheses", &ViewAlignResult::hypotheses)
+      .def_readonly("timings", &ViewAlignResult::timings)
       .def("__repr__", [](const ViewAlignResult& r) {
         std::ostringstream out;
         out << "ViewAlignResult(status='" << verdict_name(r.status)

@@ -987,6 +987,24 @@ class ViewAlternative:
     @property
     def symmetric(self) -> bool: ...
 
+class ViewAlignTimings:
+    """Where the time of one align_views() went, by stage, seconds of the wall clock (with
+    threads=1, its CPU time)."""
+
+    @property
+    def preparation(self) -> float: ...
+    @property
+    def hypotheses(self) -> float: ...
+    @property
+    def refinement(self) -> float: ...
+    @property
+    def window_search(self) -> float: ...
+    @property
+    def verdict(self) -> float: ...
+    @property
+    def total(self) -> float: ...
+    def as_dict(self) -> dict[str, float]: ...
+
 class ViewAlignResult:
     """Outcome of align_views."""
 
@@ -1033,6 +1051,8 @@ class ViewAlignResult:
     def windows(self) -> int: ...  # windows of the window search; 0: it did not run
     @property
     def hypotheses(self) -> list[tuple[_Array, ViewSupport]]: ...
+    @property
+    def timings(self) -> ViewAlignTimings: ...
 
 def view_support(
     reference: PointCloud,

@@ -2140,6 +2140,7 @@ def _register_result_types() -> None:
     result_type("AlignResult", lambda: svs.align(F().model, F().scene, hypotheses=8))
     result_type("AlignIteration", lambda: _first(svs.align(F().model, F().scene).history, "step"))
     result_type("AlignTimings", lambda: svs.align(F().model, F().scene).timings)
+    result_type("ViewAlignTimings", lambda: svs.align_views(F().reference, F().current).timings)
     result_type(
         "AlignAlternative",
         lambda: _first(svs.align(F().reference, F().current).alternatives, "alternative"),

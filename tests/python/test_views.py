@@ -210,3 +210,19 @@ def test_the_window_search_finds_a_view_the_search_misses():
     again = svs.align_views(pair.reference, pair.current, sensor_origin=origin)
     np.testing.assert_array_equal(again.T_current_reference, result.T_current_reference)
     assert again.windows == result.windows
+
+
+def test_the_stages_account_for_the_call(table_pairs):
+    """ViewAlignResult.timings: every stage timed once, none negative, together the whole
+    call but for the settings' checks and the result's copies (consistency, not a speed);
+    the window search takes no time when it does not run."""
+    pair = table_pairs[0]
+    result = svs.align_views(pair.reference, pair.current, sensor_origin=pair.current_viewpoint)
+    stages = result.timings.as_dict()
+    total = stages.pop("total")
+    assert list(stages) == ["preparation", "hypotheses", "refinement", "window_search", "verdict"]
+    assert all(seconds >= 0.0 for seconds in stages.values())
+    assert 0.9 * total <= sum(stages.values()) <= total
+    assert all(stages[name] > 0.0 for name in ("preparation", "hypotheses", "refinement"))
+    assert result.windows == 0 and stages["window_search"] < 0.01 * total
+    assert total < 10.0  # a bound that catches a unit error (ms for s), not a speed

@@ -98,13 +98,21 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
   check_views(reference_view, current_view, params);
   if (prior) require_rigid_transform(*prior, "prior");
   const Clock::time_point started = Clock::now();
+  ViewAlignTimings timings;
+  Clock::time_point stage = started;
+  const auto lap = [&stage](double& into) {
+    into = detail::seconds_since(stage);
+    stage = Clock::now();
+  };
   const ViewScale scale = scale_of(reference_view, current_view, params);
   PreparedViews prepared(reference_view, current_view, params, scale, started);
   const Views views = prepared.views();
   detail::MovingModel& model = views.model;
   SupportCheck& support = views.support;
+  lap(timings.preparation);
 
   const std::vector<Hypothesis> ranked = hypotheses(views);
+  lap(timings.hypotheses);
   std::optional<ViewAlignResult> kept;
   bool in_time = true;
   if (prior) {
@@ -117,6 +125,7 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
     in_time = !expired(views);
   }
   if (in_time) in_time = refine_into(views, ranked, params.refinements, kept);
+  lap(timings.refinement);
   std::vector<Hypothesis> checked = ranked;
   int windows_checked = 0;
   if (in_time && kept && kept->support.score < params.window_search_below) {
@@ -126,6 +135,7 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
     checked.insert(checked.end(), windows.begin(), windows.end());
     sort_by_support(checked);
   }
+  lap(timings.window_search);
   ViewAlignResult best = kept ? std::move(*kept) : ViewAlignResult();
   // Timed out only when the deadline was hit: a search may find fewer rotations than it
   // asked for (a view of few distinct normals).
@@ -139,6 +149,9 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
     best.hypotheses.emplace_back(model.transform_of(h.pose), h.support);
   }
   detail::views::judge(views, best, checked, !in_time);
+  lap(timings.verdict);
+  timings.total = detail::seconds_since(started);
+  best.timings = timings;
   return best;
 }
 

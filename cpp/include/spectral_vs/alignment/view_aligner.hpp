@@ -100,6 +100,22 @@ struct ViewAlternative {
                                    ///< poses (as AlignAlternative::symmetric): the same answer.
 };
 
+/// Where the time of one `align_views` went, by stage, seconds of the wall clock (with
+/// threads = 1, its CPU time).
+struct ViewAlignTimings {
+  /// The scale, both views downsampled, their dominant planes balanced, their EGIs and
+  /// correlation, the verification's depth image, the ICP's neighbour grids.
+  double preparation = 0.0;
+  /// The SO(3) search, its rotations refined, placed by phase correlation, through a short
+  /// ICP and checked.
+  double hypotheses = 0.0;
+  double refinement = 0.0;     ///< Algorithm 1 and the ICP from the prior and the best.
+  double window_search = 0.0;  ///< The window search and its refinements (0: it did not run).
+  /// The verification of the pose, its alternatives, its covariance and the verdict.
+  double verdict = 0.0;
+  double total = 0.0;  ///< The whole call.
+};
+
 /// Outcome of `align_views`.
 struct ViewAlignResult {
   Transform T_current_reference = Transform::Identity();  ///< Maps reference points into the
@@ -156,6 +172,7 @@ struct ViewAlignResult {
   int windows = 0;           ///< Windows the window search checked (0: it did not run).
   /// The checked hypotheses, best score first: T_current_reference and support.
   std::vector<std::pair<Transform, ViewSupport>> hypotheses;
+  ViewAlignTimings timings;  ///< Where the time went, by stage.
 };
 
 /// The support of a given pose, as `align_views` scores its refined poses: the views
