@@ -126,6 +126,21 @@ def table(rows: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def write_profile(rows: dict[str, list[dict]], command: str, what: str, name: str) -> None:
+    """The stamped table: into benchmarks/results/<name>.json and the <name> block."""
+    stamp = (
+        f"Commit `{commit()}`, {machine()}, one thread, CPU time; `{command}`. Per stage: the "
+        f"mean ms per call (its share of the call). `python`: the Python side of {what}."
+    )
+    (RESULTS / f"{name}.json").write_text(
+        json.dumps({"stamp": stamp, "rows": rows}, indent=1) + "\n"
+    )
+    text = stamp + "\n\n" + table(rows)
+    print(text)
+    if replace_block(BENCHMARKS_DOC, name, text):
+        print(f"wrote the table into {BENCHMARKS_DOC}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases-per-cell", type=int, default=3, help="cases per family and angle")
@@ -133,41 +148,21 @@ def main() -> int:
     parser.add_argument("--views", action="store_true", help="profile align_views instead")
     parser.add_argument("--pairs", type=int, default=5, help="view pairs per family (--views)")
     args = parser.parse_args()
+    command = "OMP_NUM_THREADS=1 python benchmarks/stage_profile.py"
     if args.views:
-        return main_views(args.pairs)
-    rows = run(tuple(args.families), args.cases_per_cell)
-    stamp = (
-        f"Commit `{commit()}`, {machine()}, one thread, CPU time; "
-        f"`OMP_NUM_THREADS=1 python benchmarks/stage_profile.py "
-        f"--cases-per-cell {args.cases_per_cell}`. Per stage: the mean ms per call (its share "
-        "of the call). `python`: the Python side of `svs.align` (its downsampling of both "
-        "clouds)."
-    )
-    (RESULTS / "stage_profile.json").write_text(
-        json.dumps({"stamp": stamp, "rows": rows}, indent=1) + "\n"
-    )
-    text = stamp + "\n\n" + table(rows)
-    print(text)
-    if replace_block(BENCHMARKS_DOC, "stage_profile", text):
-        print(f"wrote the table into {BENCHMARKS_DOC}")
-    return 0
-
-
-def main_views(pairs: int) -> int:
-    rows = run_views(pairs)
-    stamp = (
-        f"Commit `{commit()}`, {machine()}, one thread, CPU time; "
-        f"`OMP_NUM_THREADS=1 python benchmarks/stage_profile.py --views --pairs {pairs}`. "
-        "Per stage: the mean ms per call (its share of the call). `python`: the Python side "
-        "of `svs.align_views` (its checks of the inputs)."
-    )
-    (RESULTS / "view_stage_profile.json").write_text(
-        json.dumps({"stamp": stamp, "rows": rows}, indent=1) + "\n"
-    )
-    text = stamp + "\n\n" + table(rows)
-    print(text)
-    if replace_block(BENCHMARKS_DOC, "view_stage_profile", text):
-        print(f"wrote the table into {BENCHMARKS_DOC}")
+        write_profile(
+            run_views(args.pairs),
+            f"{command} --views --pairs {args.pairs}",
+            "`svs.align_views` (its checks of the inputs)",
+            "view_stage_profile",
+        )
+    else:
+        write_profile(
+            run(tuple(args.families), args.cases_per_cell),
+            f"{command} --cases-per-cell {args.cases_per_cell}",
+            "`svs.align` (its downsampling of both clouds)",
+            "stage_profile",
+        )
     return 0
 
 

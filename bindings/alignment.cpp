@@ -1,6 +1,7 @@
 // Bindings of the aligner (paper, section II-D and Algorithm 1).
 #include "conversions.hpp"
 #include "settings.hpp"
+#include "timings.hpp"
 
 #include <spectral_vs/alignment/aligner.hpp>
 
@@ -467,14 +468,8 @@ the residuals' variance, an inflation calibrated on the calibration set, and a w
 that keeps unconstrained directions finite (docs/trust.md).
 )doc");
 
-  // The stages of AlignTimings in the order align() runs them, then the total: one list
-  // for the attributes and as_dict().
-  struct TimingField {
-    const char* name;
-    double AlignTimings::*member;
-    const char* doc;
-  };
-  static const TimingField kTimingFields[] = {
+  // The stages of AlignTimings in the order align() runs them, then the total.
+  static const TimingField<AlignTimings> kTimingFields[] = {
       {"preparation", &AlignTimings::preparation,
        "The scene as searched (support plane out), the EGIs and their correlation, the "
        "single-view detection, the model's flat axis."},
@@ -488,25 +483,10 @@ that keeps unconstrained directions finite (docs/trust.md).
        "The check of the pose, the alternatives, the reselection, the resting poses."},
       {"verdict", &AlignTimings::verdict, "The verdict: covariance, symmetries, calibration."},
       {"total", &AlignTimings::total, "The whole call."}};
-  py::class_<AlignTimings> timings(m, "AlignTimings",
-                                   "Where the time of one align() went, by stage, seconds of the "
-                                   "wall clock (with threads=1, its CPU time).");
-  for (const TimingField& field : kTimingFields)
-    timings.def_readonly(field.name, field.member, field.doc);
-  timings
-      .def(
-          "as_dict",
-          [](const AlignTimings& t) {
-            py::dict d;
-            for (const TimingField& field : kTimingFields) d[field.name] = t.*field.member;
-            return d;
-          },
-          "The stages' seconds by name, in the order they run, and the total.")
-      .def("__repr__", [](const AlignTimings& t) {
-        std::ostringstream out;
-        out << "AlignTimings(total=" << t.total << ")";
-        return out.str();
-      });
+  define_timings(m, "AlignTimings",
+                 "Where the time of one align() went, by stage, seconds of the wall clock (with "
+                 "threads=1, its CPU time).",
+                 kTimingFields);
 
   py::class_<AlignResult>(m, "AlignResult", "Outcome of align().")
       .def_property_readonly(

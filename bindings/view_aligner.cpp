@@ -1,6 +1,7 @@
 // Bindings of align_views: two views of one scene registered globally.
 #include "conversions.hpp"
 #include "settings.hpp"
+#include "timings.hpp"
 
 #include <spectral_vs/alignment/view_aligner.hpp>
 
@@ -191,14 +192,8 @@ the reference centroids of the two poses).
         return out.str();
       });
 
-  // The stages of ViewAlignTimings in the order align_views() runs them, then the total:
-  // one list for the attributes and as_dict().
-  struct TimingField {
-    const char* name;
-    double ViewAlignTimings::*member;
-    const char* doc;
-  };
-  static const TimingField kTimingFields[] = {
+  // The stages of ViewAlignTimings in the order align_views() runs them, then the total.
+  static const TimingField<ViewAlignTimings> kTimingFields[] = {
       {"preparation", &ViewAlignTimings::preparation,
        "The scale, the views downsampled and balanced, their EGIs and correlation, the "
        "verification's depth image, the ICP's grids."},
@@ -211,25 +206,10 @@ the reference centroids of the two poses).
       {"verdict", &ViewAlignTimings::verdict,
        "The verification, the alternatives, the covariance, the verdict."},
       {"total", &ViewAlignTimings::total, "The whole call."}};
-  py::class_<ViewAlignTimings> timings(m, "ViewAlignTimings",
-                                       "Where the time of one align_views() went, by stage, "
-                                       "seconds of the wall clock (with threads=1, its CPU time).");
-  for (const TimingField& field : kTimingFields)
-    timings.def_readonly(field.name, field.member, field.doc);
-  timings
-      .def(
-          "as_dict",
-          [](const ViewAlignTimings& t) {
-            py::dict d;
-            for (const TimingField& field : kTimingFields) d[field.name] = t.*field.member;
-            return d;
-          },
-          "The stages' seconds by name, in the order they run, and the total.")
-      .def("__repr__", [](const ViewAlignTimings& t) {
-        std::ostringstream out;
-        out << "ViewAlignTimings(total=" << t.total << ")";
-        return out.str();
-      });
+  define_timings(m, "ViewAlignTimings",
+                 "Where the time of one align_views() went, by stage, seconds of the wall clock "
+                 "(with threads=1, its CPU time).",
+                 kTimingFields);
 
   py::class_<ViewAlignResult>(m, "ViewAlignResult", R"doc(
 Outcome of ``align_views``.
