@@ -34,33 +34,30 @@ import spectral_vs as svs
 ANGLES = (30.0, 90.0, 150.0)
 
 
+def timed(call) -> dict:
+    """A call's CPU time, split into its result's C++ stages (``timings``, in the order
+    they run) and its Python side (the CPU time less their total), seconds."""
+    start = time.process_time()
+    result = call()
+    cpu = time.process_time() - start
+    stages = result.timings.as_dict()
+    row = {"python": max(0.0, cpu - stages.pop("total"))} | stages
+    return row | {"cpu": cpu, "reliable": bool(result.reliable)}
+
+
 def profile(case: case_lib.Case) -> dict:
     """One alignment's CPU time, split by stage, seconds."""
     model, scene = case.model_cloud(), case.scene_cloud()
     sensor = {}
     if np.all(np.isfinite(case.viewpoint)):
         sensor = {"sensor_origin": case.viewpoint, "scene_view": "single_view"}
-    start = time.process_time()
-    result = svs.align(model, scene, threads=1, **sensor)
-    cpu = time.process_time() - start
-    # The C++ stages of AlignTimings, in the order align() runs them.
-    stages = result.timings.as_dict()
-    row = {"python": max(0.0, cpu - stages.pop("total"))} | stages
-    row["cpu"] = cpu
-    row["reliable"] = bool(result.reliable)
-    return row
+    return timed(lambda: svs.align(model, scene, threads=1, **sensor))
 
 
 def profile_views(pair) -> dict:
     """One align_views call's CPU time, split by stage, seconds."""
-    start = time.process_time()
-    result = svs.align_views(pair.reference, pair.current, sensor_origin=pair.current_viewpoint)
-    cpu = time.process_time() - start
-    stages = result.timings.as_dict()
-    row = {"python": max(0.0, cpu - stages.pop("total"))} | stages
-    row["cpu"] = cpu
-    row["reliable"] = bool(result.reliable)
-    return row
+    origin = pair.current_viewpoint
+    return timed(lambda: svs.align_views(pair.reference, pair.current, sensor_origin=origin))
 
 
 #: The view-pair families: (label, scan or None for rendered pairs, downscale).
