@@ -39,6 +39,7 @@ Usage (about 20 minutes on one core)::
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
@@ -49,6 +50,8 @@ import cases as case_lib
 import numpy as np
 import peers
 import report as report_lib
+
+import spectral_vs as svs
 
 RESULTS = report_lib.RESULTS / "cost_growth.json"
 FIGURE = report_lib.ROOT / "docs" / "figures" / "cost_growth.png"
@@ -83,7 +86,9 @@ OBJECTS_PER_AREA = 3 / 0.49  # other objects per m^2 of table
 START_ANGLE_DEG, START_OFFSET = 10.0, 0.02  # the local methods' start off the truth
 
 
+@functools.cache
 def _mesh(name: str, size: float | None = None) -> case_lib.Mesh:
+    """The mesh of an object of benchmarks/cases.py, scaled to ``size`` (read once)."""
     mesh = case_lib.load_mesh(name)
     if size is None:
         return mesh
@@ -143,13 +148,12 @@ def make_scene(sweep: str, value: float, seed: int) -> dict[str, Any]:
         if i == 0:
             T_scene_model = T
         p, n = _sample(mesh, counts[i + 1], rng)
-        above = case_lib.apply(T, p)[:, 2] > 1e-4  # not the face it stands on
-        points.append(case_lib.apply(T, p)[above])
+        moved = case_lib.apply(T, p)
+        above = moved[:, 2] > 1e-4  # not the face it stands on
+        points.append(moved[above])
         normals.append((n @ T[:3, :3].T)[above])
     model_points, model_normals = _sample(target, model_count, rng)
     scene_points, scene_normals = np.vstack(points), np.vstack(normals)
-    import spectral_vs as svs
-
     voxel = float(
         svs.alignment_voxel_size(
             svs.PointCloud(model_points, model_normals), svs.PointCloud(scene_points, scene_normals)
@@ -195,8 +199,6 @@ def run_method(method: str, case: dict[str, Any]) -> tuple[np.ndarray, float, fl
         model, scene = _downsampled(model, voxel / 2), _downsampled(scene, voxel / 2)
     verdict = None
     if method.startswith("ours"):  # as peers.register("ours") runs it, keeping the verdict
-        import spectral_vs as svs
-
         parts = {"max_parts": ALL_PARTS} if method == "ours_all_parts" else {}
         result = svs.align(
             svs.PointCloud(*model), svs.PointCloud(*scene), voxel_size=voxel, **parts

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from test_stubs import settable_fields as bound_settable_fields
 
 from spectral_vs import _core
 
@@ -116,27 +117,27 @@ def python_name(bound: Bound, field: str) -> str:
     return dict(bound.renames).get(field, field)
 
 
-def expected_python_fields(name: str) -> list[str]:
-    """The flat Python fields of a class, from C++: its own fields and its groups'."""
+def flat_fields(name: str) -> list[tuple[str, Field, Bound]]:
+    """The flat fields of a class, from C++: its own fields and its groups', each with its
+    Python name and the struct that declares it."""
     bound = SETTINGS[name]
-    names = []
+    fields: list[tuple[str, Field, Bound]] = []
     for field in cpp_fields(bound):
         if field.name in bound.groups:
-            names += expected_python_fields(field.type)
+            fields += flat_fields(field.type)
         else:
-            names.append(python_name(bound, field.name))
-    return names
+            fields.append((python_name(bound, field.name), field, bound))
+    return fields
+
+
+def expected_python_fields(name: str) -> list[str]:
+    return [python_name for python_name, _, _ in flat_fields(name)]
 
 
 def settable_fields(cls: type) -> list[str]:
+    """The bound settings of a class, its groups aside (test_stubs.py's list has them)."""
     groups = set(getattr(cls, "_groups", ()))
-    names = []
-    for klass in reversed(cls.__mro__):
-        for key, value in vars(klass).items():
-            if isinstance(value, property) and value.fset is not None and key not in groups:
-                if not key.startswith("_") and key not in names:
-                    names.append(key)
-    return names
+    return [name for name in bound_settable_fields(cls) if name not in groups]
 
 
 def cpp_default(field: Field, bound: Bound) -> Any:
@@ -179,16 +180,8 @@ def test_python_fields_are_the_cpp_fields(name: str) -> None:
 
 
 def defaults_from_cpp(name: str) -> dict[str, Any]:
-    bound = SETTINGS[name]
-    defaults: dict[str, Any] = {}
-    for field in cpp_fields(bound):
-        if field.name in bound.groups:
-            defaults.update(defaults_from_cpp(field.type))
-            continue
-        value = cpp_default(field, bound)
-        if value is not None:
-            defaults[python_name(bound, field.name)] = value
-    return defaults
+    defaults = {python: cpp_default(field, bound) for python, field, bound in flat_fields(name)}
+    return {python: value for python, value in defaults.items() if value is not None}
 
 
 @pytest.mark.parametrize("name", sorted(SETTINGS))
@@ -224,17 +217,13 @@ def attribute_entries(cls: type) -> dict[str, str]:
 
 @pytest.mark.parametrize("name", sorted(SETTINGS))
 def test_every_field_is_documented(name: str) -> None:
-    cls = getattr(_core, name)
-    documented = attribute_entries(cls)
-    own = [f for f in settable_fields(cls) if f in expected_python_fields(name)]
-    if SETTINGS[name].groups:  # the groups' fields are documented by their classes
-        grouped = {f for g in cpp_fields(SETTINGS[name]) if g.name in SETTINGS[name].groups
-                   for f in expected_python_fields(g.type)}  # fmt: skip
-        own = [f for f in own if f not in grouped]
-    groups = list(SETTINGS[name].groups)
-    missing = [f for f in own + groups if f not in documented]
+    """The class documents its own fields and groups (a group's fields: its class)."""
+    bound = SETTINGS[name]
+    own = [python_name(bound, field.name) for field in cpp_fields(bound)]
+    documented = attribute_entries(getattr(_core, name))
+    missing = [f for f in own if f not in documented]
     assert not missing, f"{name}: fields without an entry in its docstring: {missing}"
-    unknown = [f for f in documented if f not in settable_fields(cls) + groups]
+    unknown = [f for f in documented if f not in own]
     assert not unknown, f"{name}: its docstring documents fields it does not have: {unknown}"
 
 

@@ -34,11 +34,25 @@ void check_params(const PlaneTurnParams& p) {
     fail("max_tilt must be finite and >= 0 rad, got ", p.max_tilt);
 }
 
-// Every stride-th row of `normals`.
-std::vector<Eigen::Index> strided_rows(Eigen::Index count, int stride) {
-  std::vector<Eigen::Index> rows;
-  for (Eigen::Index i = 0; i < count; i += stride) rows.push_back(i);
-  return rows;
+// Every stride-th normal split by a plane's normal: the rows off the plane (farther from
+// `normal` than the cone) and the sum of the others (on the plane).
+struct PlaneSplit {
+  std::vector<Eigen::Index> off;
+  Eigen::Vector3d on_sum = Eigen::Vector3d::Zero();
+  Eigen::Index sampled = 0;
+};
+
+PlaneSplit split_by_plane(const Points& normals, int stride, const Eigen::Vector3d& normal,
+                          double cos_cone) {
+  PlaneSplit split;
+  for (Eigen::Index row = 0; row < normals.rows(); row += stride, ++split.sampled) {
+    if (normals.row(row).dot(normal) <= cos_cone) {
+      split.off.push_back(row);
+    } else {
+      split.on_sum += normals.row(row).transpose();
+    }
+  }
+  return split;
 }
 
 // The step of the law along `axis` on the correlation of the first `bandwidth` degrees.
@@ -65,19 +79,16 @@ std::optional<PlaneTurn> PlaneTurn::of(const PointCloud& reference, const PlaneT
   PlaneDetectionParams detection;
   detection.member_cone = params.plane_cone;
   const DominantDirection dominant = dominant_direction(reference.normals(), detection);
-  const double cos_cone = std::cos(params.plane_cone);
   const Points& normals = reference.normals();
-  std::vector<Eigen::Index> off;
-  for (const Eigen::Index row : strided_rows(normals.rows(), params.stride)) {
-    if (normals.row(row).dot(dominant.axis) <= cos_cone) off.push_back(row);
-  }
-  if (dominant.share < params.min_plane_share || Eigen::Index(off.size()) < kMinOffPlane)
+  const PlaneSplit split =
+      split_by_plane(normals, params.stride, dominant.axis, std::cos(params.plane_cone));
+  if (dominant.share < params.min_plane_share || Eigen::Index(split.off.size()) < kMinOffPlane)
     return std::nullopt;
   PlaneTurnParams kept = params;
   kept.fine_bandwidth = std::max(params.fine_bandwidth, params.bandwidth);
   kept.law.local.rotation_gain = 1.0;
   ShCoefficients coefficients =
-      egi_coefficients(detail::rows_of(normals, off), kept.fine_bandwidth);
+      egi_coefficients(detail::rows_of(normals, split.off), kept.fine_bandwidth);
   return PlaneTurn(dominant.axis, std::move(coefficients), std::move(kept));
 }
 
@@ -85,21 +96,14 @@ double PlaneTurn::turn(const PointCloud& current, const Eigen::Matrix3d& R) cons
   require_normals(current, "current");
   const Eigen::Vector3d expected = R * axis_;  // where the estimate puts the plane's normal
   const Points& normals = current.normals();
-  const std::vector<Eigen::Index> sampled = strided_rows(normals.rows(), params_.stride);
-  std::vector<Eigen::Index> off;
-  Eigen::Vector3d plane = Eigen::Vector3d::Zero();  // the sum of the in-cone normals
-  for (const Eigen::Index row : sampled) {
-    if (normals.row(row).dot(expected) <= cos_cone_) {
-      off.push_back(row);
-    } else {
-      plane += normals.row(row).transpose();
-    }
-  }
-  if (Eigen::Index(off.size()) < kMinOffPlane || off.size() == sampled.size()) return 0.0;
+  const PlaneSplit split = split_by_plane(normals, params_.stride, expected, cos_cone_);
+  const auto off = Eigen::Index(split.off.size());
+  if (off < kMinOffPlane || off == split.sampled) return 0.0;
   // The tilt still off: the turn would be measured about a wrong axis.
+  const Eigen::Vector3d& plane = split.on_sum;
   if (plane.dot(expected) < std::cos(params_.max_tilt) * plane.norm()) return 0.0;
   const ShCoefficients fine =
-      egi_coefficients(detail::rows_of(normals, off), params_.fine_bandwidth);
+      egi_coefficients(detail::rows_of(normals, split.off), params_.fine_bandwidth);
   const AxisRotationStep coarse =
       step_at(fine, coefficients_, params_.bandwidth, R, axis_, params_.law);
   if (!coarse.newton || coarse.capped) return coarse.turn;

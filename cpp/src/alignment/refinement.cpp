@@ -231,8 +231,9 @@ void polish_result_rotation(const Problem& problem, WindowCache& windows, AlignR
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result, bool local) {
-  IcpSettings settings = local_icp_settings(problem.viewpoint);
-  if (!local) settings.max_points = IcpSettings().max_points;
+  IcpSettings settings;
+  settings.viewpoint = problem.viewpoint;
+  if (local) settings = local_icp_settings(problem.viewpoint);
   const double voxel_size = problem.params.scene.voxel_size;
   // The fine stage only for a densely sampled model (kIcpFineDistance).
   refine_with_icp(

@@ -4,13 +4,11 @@
 
 #include <spectral_vs/alignment/view_aligner.hpp>
 
-#include <spectral_vs/representation/preprocessing.hpp>
 #include <spectral_vs/rotation/so3_correlation.hpp>
 
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
-#include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/verifier.hpp"
 #include "alignment/view_stages.hpp"

@@ -142,6 +142,9 @@ PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, doubl
   return params.downsample ? voxel_downsample(view, 0.5 * voxel_size) : view;
 }
 
+namespace {
+
+// The settings of align()'s Algorithm 1 and phase correlation at the views' scale.
 AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
   AlignParams a;
   a.scene.voxel_size = scale.voxel_size;
@@ -153,8 +156,6 @@ AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
   a.max_seconds = p.max_seconds;
   return a;
 }
-
-namespace {
 
 // The box of the current view grown by two search voxels: the ICP's grids' extent.
 Eigen::AlignedBox3d icp_box(const PointCloud& current, const ViewScale& scale) {

@@ -125,9 +125,6 @@ struct Views {
 
 inline bool expired(const Views& views) { return Clock::now() > views.deadline; }
 
-/// The settings of align()'s Algorithm 1 and phase correlation at the views' scale.
-AlignParams loop_params(const ViewAlignParams& params, const ViewScale& scale);
-
 // Stage: preparation, whole (view_preparation.cpp): the two views as every later stage
 // reads them, made once per call; views() refers to its members.
 class PreparedViews {
