@@ -354,11 +354,9 @@ TEST(AlignResult, HistoryDescribesTheReturnedPose) {
       EXPECT_TRUE(result.history.empty());
     } else {
       ASSERT_FALSE(result.history.empty());
-      // Without the polish and the ICP the returned pose is where the run ended.
-      EXPECT_LT(rotation_error_degrees(result.history.back().T_scene_model, result.T_scene_model),
-                1e-9);
-      EXPECT_LT(translation_error_mm(result.history.back().T_scene_model, result.T_scene_model),
-                1e-9);
+      // Without the polish and the ICP the returned pose is where the run ended, to the
+      // bit (an angle from the trace of R1^T R2 has a floor of about 1e-6 degree).
+      EXPECT_EQ(result.history.back().T_scene_model, result.T_scene_model) << "seed " << seed;
       const AlignIteration& last = result.history.back();
       EXPECT_EQ(result.converged,
                 last.translation_step + last.rotation_gradient < params.local.tolerance);

@@ -309,6 +309,56 @@ TEST(Wigner, IntoReusesStorageAndMatchesWignerReal) {
   for (int l = 0; l <= 10; ++l) EXPECT_EQ(U[l], expected[l]);
 }
 
+// The rotations of test_rotations() and those where the pullback's zyz angles change
+// branch: the poles (beta = 0, pi), a pole to 1e-9 rad, and both sides of the switch at
+// |R(2, 2)| = cos 45 degrees.
+std::vector<KnownRotation> pullback_rotations() {
+  std::vector<KnownRotation> out = test_rotations();
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+  out.push_back({Eigen::Matrix3d::Identity(), 0.0, "identity"});
+  out.push_back({axis_angle(x, 1e-7), 1e-7 * kDeg, "1e-7 deg about x"});
+  out.push_back({axis_angle(x, 180.0 - 1e-7) * axis_angle(Eigen::Vector3d::UnitZ(), 40.0), 0.0,
+                 "near the lower pole"});
+  for (const double degrees : {44.999999, 45.0, 45.000001, 135.0}) {
+    out.push_back({axis_angle(Eigen::Vector3d(1, 2, 0), degrees), degrees * kDeg,
+                   std::to_string(degrees) + " off the pole"});
+  }
+  return out;
+}
+
+TEST(WignerPullback, IsTheTransposeOfWignerRealAtDegree32) {
+  const int lmax = 32;
+  std::mt19937 rng(6);
+  const ShCoefficients x = random_coefficients(lmax + 1, rng);
+  WignerPullback pullback(lmax);
+  ShCoefficients out;
+  for (const KnownRotation& r : pullback_rotations()) {
+    const WignerMatrices U = wigner_real(r.R, lmax);
+    pullback.apply(r.R, x, out);
+    for (int l = 0; l <= lmax; ++l) {
+      const Eigen::VectorXd expected = U[l].transpose() * x.segment(l * l, 2 * l + 1);
+      EXPECT_LT((out.segment(l * l, 2 * l + 1) - expected).cwiseAbs().maxCoeff(), 1e-12)
+          << r.name << ", l = " << l;
+    }
+  }
+}
+
+TEST(WignerPullback, UndoesTheRotationOfASampledFunction) {
+  // Independent of the recursion: G, the coefficients of g(x) = f(R^T x) by exact
+  // quadrature, pulled back by R are F again.
+  const int B = 17;
+  std::mt19937 rng(7);
+  const ShCoefficients F = random_coefficients(B, rng);
+  WignerPullback pullback(B - 1);
+  ShCoefficients pulled;
+  for (const KnownRotation& r : pullback_rotations()) {
+    const SphereGrid g =
+        sample(B, [&](const Eigen::Vector3d& p) { return evaluate(F, r.R.transpose() * p); });
+    pullback.apply(r.R, sh_coefficients(g, B), pulled);
+    EXPECT_LT((pulled - F).cwiseAbs().maxCoeff(), 1e-10) << r.name;
+  }
+}
+
 TEST(WignerGenerators, AgreeWithCentralDifferencesOfWignerReal) {
   const int lmax = 32;
   const double h = 1e-5;
@@ -659,6 +709,19 @@ std::string error_of(Call call) {
     return e.what();
   }
   return "no exception";
+}
+
+TEST(RotationInput, WignerPullbackRefusesARotationOrSizeItWasNotMadeFor) {
+  WignerPullback pullback(4);
+  ShCoefficients out;
+  const auto message = [&](const Eigen::Matrix3d& R, int size) {
+    return error_of([&] { pullback.apply(R, ShCoefficients::Zero(size), out); });
+  };
+  EXPECT_NE(message(Eigen::Matrix3d::Identity(), 16).find("x: expected (lmax + 1)^2 = 25"),
+            std::string::npos);
+  EXPECT_NE(message(-Eigen::Matrix3d::Identity(), 25).find("R is not a rotation matrix"),
+            std::string::npos);
+  EXPECT_NE(error_of([] { WignerPullback{128}; }).find("lmax"), std::string::npos);
 }
 
 TEST(RotationInput, RejectsNonRotations) {

@@ -75,16 +75,13 @@ So3Correlation::So3Correlation(const ShCoefficients& target, const ShCoefficient
                               apply_generator(j, model_first_[i], bandwidth));
   }
   pulled_target_.resize(target_.size());
+  pullback_.emplace(bandwidth - 1);
 }
 
 CorrelationValue So3Correlation::evaluate(const Eigen::Matrix3d& R, bool with_hessian) {
-  wigner_real_into(R, bandwidth_ - 1, wigner_);
   // C = T^T U F = (U^T T)^T F; the same pulled-back target serves every derivative,
   // since d/de U(R exp(hat e)) = U(R) u(e) (eq. 14).
-  for (int l = 0; l < bandwidth_; ++l) {
-    pulled_target_.segment(l * l, 2 * l + 1).noalias() =
-        wigner_[l].transpose() * target_.segment(l * l, 2 * l + 1);
-  }
+  pullback_->apply(R, target_, pulled_target_);
   CorrelationValue out;
   out.value = pulled_target_.dot(model_);
   for (int k = 0; k < 3; ++k) out.gradient[k] = pulled_target_.dot(model_first_[k]);

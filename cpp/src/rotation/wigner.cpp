@@ -1,6 +1,8 @@
 #include <spectral_vs/rotation/so3.hpp>
 #include <spectral_vs/rotation/wigner.hpp>
 
+#include <Eigen/Geometry>
+
 #include "common/checks.hpp"
 #include "rotation/harmonics_detail.hpp"
 
@@ -226,6 +228,80 @@ WignerMatrices wigner_real(const Eigen::Matrix3d& R, int lmax) {
   WignerMatrices out;
   wigner_real_into(R, lmax, out);
   return out;
+}
+
+WignerPullback::WignerPullback(int lmax) : lmax_(lmax) {
+  detail::require_degree(lmax, "lmax");
+  wigner_real_into(Eigen::AngleAxisd(M_PI / 2.0, Eigen::Vector3d::UnitX()).toRotationMatrix(), lmax,
+                   quarter_);
+  const auto count = Eigen::Index(lmax + 1) * (lmax + 1);
+  work_.resize(count);
+  cos_.resize(std::size_t(lmax) + 1);
+  sin_.resize(std::size_t(lmax) + 1);
+}
+
+void WignerPullback::turn_about_z(double theta, ShCoefficients& y) {
+  // cos(m theta), sin(m theta) by the angle-addition recurrence: m sincos calls cost more
+  // than the products, and the recurrence's error grows only as m eps.
+  const double c1 = std::cos(theta), s1 = std::sin(theta);
+  cos_[0] = 1.0;
+  sin_[0] = 0.0;
+  for (int m = 1; m <= lmax_; ++m) {
+    cos_[m] = cos_[m - 1] * c1 - sin_[m - 1] * s1;
+    sin_[m] = sin_[m - 1] * c1 + cos_[m - 1] * s1;
+  }
+  // Z(theta) turns the pair (a, b) = (-m, m) by m theta: Z_aa = Z_bb = cos, Z_ab = -Z_ba =
+  // sin (the generator u_z); its transpose turns it back.
+  for (int l = 1; l <= lmax_; ++l) {
+    double* v = y.data() + l * l + l;  // v[m]: coefficient of order m of degree l
+    for (int m = 1; m <= l; ++m) {
+      const double a = v[-m], b = v[m];
+      v[-m] = cos_[m] * a - sin_[m] * b;
+      v[m] = sin_[m] * a + cos_[m] * b;
+    }
+  }
+}
+
+void WignerPullback::quarter_turn(const ShCoefficients& x, ShCoefficients& out,
+                                  bool transposed) const {
+  out[0] = x[0];
+  for (int l = 1; l <= lmax_; ++l) {
+    const Eigen::Index at = Eigen::Index(l) * l, size = 2 * l + 1;
+    if (transposed) {
+      out.segment(at, size).noalias() = quarter_[l].transpose() * x.segment(at, size);
+    } else {
+      out.segment(at, size).noalias() = quarter_[l] * x.segment(at, size);
+    }
+  }
+}
+
+void WignerPullback::apply(const Eigen::Matrix3d& R, const ShCoefficients& x, ShCoefficients& out) {
+  require_rotation(R, "R");
+  if (x.size() != work_.size()) {
+    fail("x: expected (lmax + 1)^2 = ", work_.size(), " coefficients, got ", x.size());
+  }
+  out.resize(x.size());
+  // Near a pole of the zyz angles alpha and gamma are ill-conditioned: there R = Rx(90) R'
+  // with R' = Rx(-90) R (rows permuted, exactly) far from it, and U(R)^T = U(R')^T K^T.
+  Eigen::Matrix3d turned = R;
+  const ShCoefficients* start = &x;
+  if (std::abs(R(2, 2)) > M_SQRT1_2) {
+    turned.row(1) = R.row(2);
+    turned.row(2) = -R.row(1);
+    quarter_turn(x, out, true);
+    start = &out;
+  }
+  const double alpha = std::atan2(turned(1, 2), turned(0, 2));
+  const double beta = std::atan2(std::hypot(turned(0, 2), turned(1, 2)), turned(2, 2));
+  const double gamma = std::atan2(turned(2, 1), -turned(2, 0));
+  // U(R')^T = Z(gamma)^T K^T Z(beta)^T K Z(alpha)^T, applied right to left.
+  work_ = *start;
+  turn_about_z(alpha, work_);
+  quarter_turn(work_, out, false);
+  turn_about_z(beta, out);
+  quarter_turn(out, work_, true);
+  turn_about_z(gamma, work_);
+  out = work_;
 }
 
 WignerGenerators wigner_generators(int lmax) {

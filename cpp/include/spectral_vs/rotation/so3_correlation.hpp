@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <optional>
 
 namespace spectral_vs {
 
@@ -56,8 +57,8 @@ class So3Correlation {
   ShCoefficients target_, model_;               // as correlated (normalised when asked)
   std::array<ShCoefficients, 3> model_first_;   // u_k F, k = x, y, z
   std::array<ShCoefficients, 6> model_second_;  // (u_i u_j + u_j u_i) F / 2: xx yy zz xy xz yz
-  WignerMatrices wigner_;
-  ShCoefficients pulled_target_;  // U(R)^T target, per degree
+  std::optional<WignerPullback> pullback_;      // of degrees 0..B-1, made once B is checked
+  ShCoefficients pulled_target_;                // U(R)^T target, per degree
 };
 
 /// J_r of eq. (16): 0.5 ||g - f(R^T .)||^2 = 0.5 sum_l |G^l - U^l(R) F^l|^2 (Parseval),

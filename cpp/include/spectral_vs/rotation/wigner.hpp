@@ -45,6 +45,37 @@ WignerGenerators wigner_generators(int lmax);
 void apply_wigner_generator(int axis, const Eigen::Ref<const Eigen::VectorXd>& x,
                             Eigen::Ref<Eigen::VectorXd> y);
 
+/// U(R)^T x for SH coefficient vectors of degrees 0..lmax, without forming U(R): by the
+/// zyz factorisation R = Rz(alpha) Ry(beta) Rz(gamma), U(R) = Z(alpha) K^T Z(beta) K Z(gamma)
+/// with Z(theta) = U(Rz(theta)) a rotation of each (m, -m) pair by m theta and
+/// K = U(Rx(90 degrees)) fixed. Two dense products per degree, against the five
+/// multiply-adds per entry of the recursion and one product: what an SO(3) correlation
+/// evaluates at each rotation. A rotation within 45 degrees of a pole (|R(2, 2)| > cos 45)
+/// is first turned by Rx(-90) so that beta stays well conditioned. Agrees with
+/// wigner_real to rounding (tests/cpp/rotation_test.cpp).
+class WignerPullback {
+ public:
+  /// @throws std::invalid_argument if lmax is outside [0, kMaxBandwidth - 1].
+  explicit WignerPullback(int lmax);
+
+  /// out = U(R)^T x; x holds (lmax + 1)^2 coefficients. `out` must not be `x`.
+  /// @throws std::invalid_argument if R is not a rotation or x has another size.
+  void apply(const Eigen::Matrix3d& R, const ShCoefficients& x, ShCoefficients& out);
+
+  int lmax() const { return lmax_; }
+
+ private:
+  // y = Z(theta)^T y, degree by degree.
+  void turn_about_z(double theta, ShCoefficients& y);
+  // out = K x (transposed: K^T x), degree by degree.
+  void quarter_turn(const ShCoefficients& x, ShCoefficients& out, bool transposed) const;
+
+  int lmax_;
+  WignerMatrices quarter_;  // K = U(Rx(90 degrees)), per degree
+  ShCoefficients work_;
+  std::vector<double> cos_, sin_;  // cos(m theta), sin(m theta), m = 0..lmax
+};
+
 /// G^l = U^l F^l for every degree of F; U must hold at least the degrees of F.
 /// @throws std::invalid_argument if F is not a full B^2 vector or U has too few degrees.
 ShCoefficients rotate_coefficients(const ShCoefficients& F, const WignerMatrices& U);
