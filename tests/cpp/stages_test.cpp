@@ -89,6 +89,46 @@ TEST(Hypotheses, TheFittestIsTheTruePoseWithinTheSearchGrid) {
   }
 }
 
+TEST(Hypotheses, PlacedRotationsRefineEachCandidatePlaceItAndScoreItInTheSearchOrder) {
+  const MovedObject object(3);
+  Stages stages(object);
+  const Eigen::Matrix3d R_true = object.T_scene_model.topLeftCorner<3, 3>();
+  // The truth turned by 4 degrees (within the EGI correlation's basin), and a wrong turn.
+  const std::vector<RotationCandidate> candidates = {{R_true * about({0.0, 1.0, 1.0}, 4.0), 0.0},
+                                                     {R_true * about({1.0, 0.0, 0.0}, 120.0), 0.0}};
+  const Eigen::Vector3d start = stages.problem.scene.cloud().centroid();
+  const AlignParams& params = object.params;
+  SceneTranslation placement(stages.problem.scene, start, stages.moving.reach(),
+                             stages.search_voxel, params.scene.occupancy, phase_params(params),
+                             params.limits);
+  const Eigen::Vector3d start_offset = start - stages.moving.centroid();
+  std::vector<int> scored;
+  const auto score = [&](Hypothesis& h) {
+    scored.push_back(h.index);
+    h.fitness = 1.0 / (1.0 + h.index);
+  };
+  const std::vector<Hypothesis> placed =
+      placed_rotations(candidates, stages.prepared.correlation, RotationRefineParams(),
+                       stages.moving, placement, start_offset, Clock::time_point::max(), score);
+  ASSERT_EQ(placed.size(), 2u);
+  EXPECT_EQ(scored, (std::vector<int>{0, 1}));
+  EXPECT_EQ(placed[0].index, 0);
+  EXPECT_DOUBLE_EQ(placed[1].fitness, 0.5);
+  // Refined on the EGI correlation to the truth's rotation, placed on the grid of search
+  // voxels over the scene.
+  const auto [degrees, metres] = object.error(stages.moving.transform_of(placed[0].pose));
+  EXPECT_LT(degrees, 1.0);
+  EXPECT_LT(metres, stages.search_voxel);
+  // Past the deadline the first is still placed, the rest left out.
+  scored.clear();
+  const std::vector<Hypothesis> late =
+      placed_rotations(candidates, stages.prepared.correlation, RotationRefineParams(),
+                       stages.moving, placement, start_offset, Clock::time_point::min(), score);
+  ASSERT_EQ(late.size(), 1u);
+  EXPECT_EQ(late[0].pose.offset, placed[0].pose.offset);
+  EXPECT_EQ(scored, (std::vector<int>{0}));
+}
+
 TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
   const MovedObject object(3);
   Stages stages(object);

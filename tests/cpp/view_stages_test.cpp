@@ -80,8 +80,10 @@ TEST(ViewHypotheses, TheBestSupportedIsTheTrueMotionWithinTheSearchGrid) {
   const Views views = prepared.views();
   const std::vector<Hypothesis> ranked = hypotheses(views);
   ASSERT_FALSE(ranked.empty());
-  for (std::size_t i = 1; i < ranked.size(); ++i)
-    EXPECT_GE(ranked[i - 1].support.score, ranked[i].support.score) << "best supported first";
+  for (std::size_t i = 0; i < ranked.size(); ++i) {
+    if (i > 0) EXPECT_GE(ranked[i - 1].support.score, ranked[i].support.score) << "best first";
+    EXPECT_EQ(ranked[i].fitness, ranked[i].support.score) << "ranked by its support";
+  }
   const auto [degrees, metres] = pair.error(views.model.transform_of(ranked.front().pose));
   EXPECT_LT(degrees, 5.0);
   EXPECT_LT(metres, 2.0 * scale.search_voxel_size);

@@ -88,17 +88,11 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
                           params.scene.occupancy, phase_params(params), params.limits);
   RotationRefineParams refine;
   refine.newton = params.local.rotation_step == RotationStep::newton;
-  std::vector<Hypothesis> hypotheses;
-  for (std::size_t h = 0; h < candidates.size(); ++h) {
-    if (h > 0 && expired(problem)) break;  // the best-correlated ones are first
-    Hypothesis hypothesis;
-    hypothesis.index = static_cast<int>(h);
-    hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
-    hypothesis.pose.offset = start - problem.model.centroid();
-    hypothesis.pose.offset += coarse.estimate(problem.model.move(hypothesis.pose)).shift;
-    hypothesis.fitness = problem.model.fitness(problem.verifier, hypothesis.pose, search_voxel);
-    hypotheses.push_back(hypothesis);
-  }
+  std::vector<Hypothesis> hypotheses = placed_rotations(
+      candidates, correlation, refine, problem.model, coarse, start - problem.model.centroid(),
+      problem.deadline, [&](Hypothesis& hypothesis) {
+        hypothesis.fitness = problem.model.fitness(problem.verifier, hypothesis.pose, search_voxel);
+      });
   rank(hypotheses);
   return hypotheses;
 }

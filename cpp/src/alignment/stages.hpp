@@ -15,6 +15,7 @@
 #include <spectral_vs/alignment/aligner.hpp>
 
 #include "alignment/align_detail.hpp"
+#include "alignment/hypothesis.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/verifier.hpp"
@@ -82,20 +83,6 @@ class StageTimer {
 
 /// The time limit of params.max_seconds has passed.
 inline bool expired(const Problem& problem) { return Clock::now() > problem.deadline; }
-
-/// A pose to refine: where the search found it (its rank in the SO(3) search, or -1
-/// for the initial guess) and its fitness.
-struct Hypothesis {
-  int index = 0;
-  Pose pose;
-  double fitness = 0.0;
-};
-
-/// Fittest first; equals keep their order.
-inline void rank(std::vector<Hypothesis>& hypotheses) {
-  std::stable_sort(hypotheses.begin(), hypotheses.end(),
-                   [](const Hypothesis& a, const Hypothesis& b) { return a.fitness > b.fitness; });
-}
 
 inline Eigen::AlignedBox3d box_of(const Points& points) {
   return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(),

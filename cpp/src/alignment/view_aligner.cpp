@@ -119,6 +119,7 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
     given.index = -1;
     given.pose = model.pose_of(*prior);
     given.support = support.of(*prior, kCoarseTolerance);
+    given.fitness = given.support.score;
     kept = refine(views, given);
     in_time = !expired(views);
   }
@@ -128,10 +129,10 @@ ViewAlignResult align_views(const PointCloud& reference_view, const PointCloud& 
   int windows_checked = 0;
   if (in_time && kept && kept->support.score < params.window_search_below) {
     std::vector<Hypothesis> windows = window_hypotheses(views, int(ranked.size()), windows_checked);
-    sort_by_support(windows);
+    rank(windows);
     in_time = !expired(views) && refine_into(views, windows, kWindowRefinements, kept);
     checked.insert(checked.end(), windows.begin(), windows.end());
-    sort_by_support(checked);
+    rank(checked);
   }
   lap(timings.window_search);
   ViewAlignResult best = kept ? std::move(*kept) : ViewAlignResult();

@@ -50,6 +50,7 @@ void check_hypothesis(const Views& views, Hypothesis& hypothesis) {
   if (icp.iterations > 0) hypothesis.pose = views.model.pose_of(icp.T_scene_model);
   hypothesis.support =
       views.support.of(views.model.transform_of(hypothesis.pose), kCoarseTolerance);
+  hypothesis.fitness = hypothesis.support.score;
 }
 
 // The best rotations of one window's EGI against the reference's, each placed on a small
@@ -191,18 +192,10 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
                              detail::phase_params(views.loop), views.params.limits);
   RotationRefineParams refine;
   refine.max_iterations = kRotationRefineIterations;
-  std::vector<Hypothesis> out;
-  for (std::size_t h = 0; h < candidates.size(); ++h) {
-    if (h > 0 && expired(views)) break;
-    Hypothesis hypothesis;
-    hypothesis.index = int(h);
-    hypothesis.pose.R = refine_rotation(views.correlation, candidates[h].R, refine).R;
-    hypothesis.pose.offset = centred.offset;
-    hypothesis.pose.offset += placement.estimate(views.model.move(hypothesis.pose)).shift;
-    check_hypothesis(views, hypothesis);
-    out.push_back(hypothesis);
-  }
-  sort_by_support(out);
+  std::vector<Hypothesis> out = placed_rotations(
+      candidates, views.correlation, refine, views.model, placement, centred.offset, views.deadline,
+      [&](Hypothesis& hypothesis) { check_hypothesis(views, hypothesis); });
+  rank(out);
   return out;
 }
 

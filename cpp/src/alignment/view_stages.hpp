@@ -10,6 +10,7 @@
 #include <spectral_vs/alignment/view_aligner.hpp>
 #include <spectral_vs/rotation/so3_correlation.hpp>
 
+#include "alignment/hypothesis.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/point_sets.hpp"
@@ -97,11 +98,8 @@ class SupportCheck {
   Points points_, normals_, moved_, turned_;
 };
 
-struct Hypothesis {
-  int index = 0;
-  Pose pose;
-  ViewSupport support;
-};
+using detail::Hypothesis;  // fitness: its support's score
+using detail::rank;
 
 // What the stages share: the prepared views and their EGI correlation.
 struct Views {
@@ -156,13 +154,6 @@ class PreparedViews {
   const detail::IcpScene coarse_scene_, fine_scene_;
   const Clock::time_point deadline_;
 };
-
-// Best supported first; of equal scores, in their order.
-inline void sort_by_support(std::vector<Hypothesis>& hypotheses) {
-  std::stable_sort(
-      hypotheses.begin(), hypotheses.end(),
-      [](const Hypothesis& a, const Hypothesis& b) { return a.support.score > b.support.score; });
-}
 
 // Stage: hypotheses (view_hypotheses.cpp): the search's, best supported first.
 std::vector<Hypothesis> hypotheses(const Views& views);
