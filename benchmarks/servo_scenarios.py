@@ -344,6 +344,10 @@ def plot_figure(path: Path) -> None:
                 robot, scenario_name, q, reference, T_reference, max_steps=MAX_STEPS
             )
             errors = experiment.true_errors(log, T_reference)
+            print(
+                f"{scenario_name}: {log.reason} after {log.records[-1].time:.1f} s, "
+                f"{errors[-1, 0]:.2f} mm, {errors[-1, 1]:.3f} deg"
+            )
             t = np.array([r.time for r in log.records])
             held = np.array([bool(r.hold) for r in log.records])
             for axis, column, unit in ((axes[0], 0, "mm"), (axes[1], 1, "deg")):
