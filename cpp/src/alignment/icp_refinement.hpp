@@ -117,6 +117,18 @@ IcpOutcome refine_point_to_plane(const PointCloud& model, const PointCloud& scen
 // degrees.
 constexpr double kIcpFineDistance = 0.4;
 
+// Both modes keep the ICP's pose unless its score (align's fitness, align_views' support
+// score) falls more than this below the pose it started from: a slide off the object. At
+// a voxel's tolerance a precise pose scores about as a rough one, so a small loss is no
+// sign of a worse pose.
+constexpr double kIcpScoreLoss = 0.05;
+
+/// The one rule of both modes' ICP refinement: the ICP's pose, scored `icp_score`, replaces
+/// one scored `start_score` (kIcpScoreLoss).
+inline bool keeps_icp(double icp_score, double start_score) {
+  return !(icp_score < start_score - kIcpScoreLoss);
+}
+
 /// The aligner's ICP: `refine_point_to_plane` with pairs within `voxel_size`, then, if
 /// `fine`, from where it ended with pairs within kIcpFineDistance voxel; a stage that
 /// takes no step ends it. `settings.max_distance` is set by the stage. The outcome's

@@ -20,10 +20,6 @@ constexpr double kPolishLastStep = 0.25 * M_PI / 180.0;
 constexpr int kPolishFirstStepRounds = 5;  // at most 20 degrees walked at the first step
 constexpr double kPolishMinDensity = 2.0;  // model points per occupied voxel
 
-// The ICP refinement of a result (AlignParams::refinement.icp_refinement), against the whole scene;
-// kept unless it loses more than kIcpFitnessLoss of fitness (a slide off the object).
-constexpr double kIcpFitnessLoss = 0.05;
-
 // The EGI of the scene points in a window: in clutter, the object's own normals
 // rather than the whole scene's.
 std::optional<ShCoefficients> window_coefficients(const SceneMap& scene,
@@ -252,7 +248,7 @@ void refine_with_icp(const PointCloud& model, const PointCloud& scene, double vo
       refine_in_two_stages(model, scene, result.T_scene_model, voxel_size, settings, fine);
   if (icp.iterations == 0) return;
   const double fitness = fitness_of(icp.T_scene_model);
-  if (fitness < result.fitness - kIcpFitnessLoss) return;
+  if (!keeps_icp(fitness, result.fitness)) return;
   result.T_scene_model = icp.T_scene_model;
   result.fitness = fitness;
   result.icp_iterations = icp.iterations;

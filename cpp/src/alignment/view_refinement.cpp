@@ -10,10 +10,6 @@ namespace spectral_vs::detail::views {
 
 namespace {
 
-// The ICP's pose is kept unless it loses this much of the coarse score (as align()'s
-// fitness rule): at a voxel's tolerance a precise pose scores about as a rough one, and
-// the refined poses are compared precise.
-constexpr double kIcpScoreLoss = 0.05;
 // Translation room of Algorithm 1 around each hypothesis, in search voxels: the
 // placement is within half a search voxel, the rotation within a few degrees.
 constexpr double kRefinementRoom = 2.0;
@@ -29,7 +25,7 @@ void refine_with_icp(const Views& views, ViewAlignResult& result) {
   const int iterations = outcome.iterations;
   if (iterations == 0) return;
   const ViewSupport icp_support = views.support.of(T, kCoarseTolerance);
-  if (icp_support.score >= result.support.score - kIcpScoreLoss) {
+  if (keeps_icp(icp_support.score, result.support.score)) {
     result.T_current_reference = T;
     result.support = icp_support;
     result.icp_iterations = iterations;
