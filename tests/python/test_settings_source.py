@@ -7,6 +7,10 @@ every default the docstring states equal to the real one, and, for ``AlignParams
 the fields docs/alignment.md lists. The stubs are checked against the bound classes by
 test_stubs.py, so a field added, renamed or given another default in C++ fails here until
 every copy follows.
+
+And what each of align()'s stages reads (issue 35, point 2): every ``params.<group>.<field>``
+in ``cpp/src/alignment`` against the row of docs/architecture.md's stage table that names
+its file, both ways.
 """
 
 from __future__ import annotations
@@ -296,3 +300,85 @@ def test_the_alignment_docs_list_every_group_field() -> None:
             f"docs/alignment.md lists {rows[cls]} for {cls}, C++ declares "
             f"{expected_python_fields(cls)}"
         )
+
+
+# --- What each of align()'s stages reads (docs/architecture.md) ---------------------------
+
+STAGE_SOURCES = ROOT / "cpp" / "src" / "alignment"
+ARCHITECTURE_DOC = ROOT / "docs" / "architecture.md"
+#: The groups a stage declares; `scene` (the unit every stage measures in) and the
+#: top-level fields (threads, limits, max_seconds, initial_guess) every stage may read.
+STAGE_GROUPS = ("search", "refinement", "local", "verification")
+GROUP_READ = re.compile(r"params(?:\(\))?\.(" + "|".join(STAGE_GROUPS) + r")\.(\w+)")
+
+
+def stage_reads() -> dict[str, set[tuple[str, str]]]:
+    """Per source file of align()'s stages (not align_views' view_* files), the
+    (group, field) of every AlignParams group it reads."""
+    reads = {}
+    for path in sorted(STAGE_SOURCES.glob("*.[ch]pp")):
+        if path.name.startswith("view_"):
+            continue
+        found = set(GROUP_READ.findall(path.read_text()))
+        if found:
+            reads[path.name] = found
+    return reads
+
+
+def stage_table() -> list[tuple[list[str], str]]:
+    """The rows of docs/architecture.md's stage table: (its files, what it declares)."""
+    text = ARCHITECTURE_DOC.read_text()
+    table = text[text.index("| stage | group |") :].split("\n\n", 1)[0]
+    rows = []
+    for line in table.splitlines()[2:]:
+        stage, declared = line.strip("|").split("|", 1)
+        rows.append((re.findall(r"`(\w+\.[ch]pp)`", stage), declared))
+    return rows
+
+
+def declared_reads(declared: str) -> tuple[set[str], set[tuple[str, str]]]:
+    """What a row's second column names: whole groups (`search`, or `search` followed by a
+    parenthesised list of some of its fields counts as those fields) and single fields
+    (`local.max_translation`)."""
+    groups, fields = set(), set()
+    for match in re.finditer(r"`(\w+)(?:\.(\w+))?`( \(([^)]*)\))?", declared):
+        group, field, _, listed = match.groups()
+        if group not in STAGE_GROUPS:
+            continue
+        if field:
+            fields.add((group, field))
+        else:
+            groups.add(group)
+    for match in re.finditer(r"(?<![`.\w])(" + "|".join(STAGE_GROUPS) + r") \(([^)]*)\)", declared):
+        group, listed = match.groups()
+        fields |= {
+            (group, name.strip()) for name in listed.split(",") if name.strip().isidentifier()
+        }
+    return groups, fields
+
+
+def test_every_stage_reads_only_the_settings_its_row_declares():
+    rows = stage_table()
+    described = {name for files, _ in rows for name in files}
+    reads = stage_reads()
+    assert set(reads) <= described, f"stage files missing from the table: {set(reads) - described}"
+    for files, declared in rows:
+        if "every group" in declared:
+            continue
+        groups, fields = declared_reads(declared)
+        read = set().union(*(reads.get(name, set()) for name in files))
+        undeclared = {(g, f) for g, f in read if g not in groups and (g, f) not in fields}
+        assert not undeclared, f"{files} read {sorted(undeclared)}, not in their row"
+        for group in groups | {g for g, _ in fields}:
+            assert any(g == group for g, _ in read), f"{files}: row names {group}, never read"
+
+
+def test_the_stage_reads_parser_sees_a_read_and_a_declaration():
+    assert GROUP_READ.findall("problem.params.search.max_parts + params().local.icp") == [
+        ("search", "max_parts"),
+        ("local", "icp"),
+    ]
+    groups, fields = declared_reads(
+        "`search` (hypotheses); `local.rotation_step`, the switches: `refinement` (polish, icp)"
+    )
+    assert groups == {"search", "refinement"} and ("local", "rotation_step") in fields
