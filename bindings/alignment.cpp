@@ -431,6 +431,41 @@ tracking fitness by it. Raises ValueError for non-finite points, a T that is not
 a max_depth that is not > 0.)doc");
 
   m.def(
+      "step_score",
+      [](double visible_fitness, bool carried, const py::handle& reference_points,
+         const py::handle& T, const py::handle& current_points, double relocalize_fitness,
+         double min_field_share, double max_depth) {
+        StepScoreParams params;
+        params.relocalize_fitness = relocalize_fitness;
+        params.min_field_share = min_field_share;
+        params.max_depth = max_depth;
+        const Transform T_current_reference = to_transform(T, "T_current_reference");
+        // The clouds cross into C++ only when the score reads the field (a copy of the
+        // view's points is a third of a millisecond).
+        StepScore score;
+        if (step_score_needs_field(visible_fitness, params)) {
+          score =
+              step_score(visible_fitness, carried, to_points(reference_points, "reference_points"),
+                         T_current_reference, to_points(current_points, "current_points"), params);
+        } else {
+          score =
+              step_score(visible_fitness, carried, Points(), T_current_reference, Points(), params);
+        }
+        return py::make_tuple(score.score, score.confidence);
+      },
+      py::arg("visible_fitness"), py::arg("carried"), py::arg("reference_points"),
+      py::arg("T_current_reference"), py::arg("current_points"), py::arg("relocalize_fitness"),
+      py::arg("min_field_share") = StepScoreParams().min_field_share,
+      py::arg("max_depth") = std::numeric_limits<double>::infinity(), R"doc(
+The servo's judgement of one step's estimate: ``(score, confidence)``. ``score`` is
+``visible_fitness`` (the registration's fitness over the reference's part no occluder
+hides) from ``relocalize_fitness`` up; under it, that fitness over the share of
+``reference_points`` that ``T_current_reference`` puts in the field of ``current_points``
+(``field_share``, at least ``min_field_share``), at most 1. ``confidence`` is
+``calibrated_confidence(score, 'servo_carried' if carried else 'servo')``. The clouds are
+read only under ``relocalize_fitness``. Raises ValueError as ``field_share`` then.)doc");
+
+  m.def(
       "calibrated_confidence",
       [](double score, const std::string& kind) {
         return calibrated_confidence(score, registration_kind(kind));

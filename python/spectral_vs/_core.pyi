@@ -782,6 +782,16 @@ def field_share(
     current_points: npt.ArrayLike,
     max_depth: float = ...,
 ) -> float: ...
+def step_score(
+    visible_fitness: float,
+    carried: bool,
+    reference_points: npt.ArrayLike,
+    T_current_reference: npt.ArrayLike,
+    current_points: npt.ArrayLike,
+    relocalize_fitness: float,
+    min_field_share: float = 0.3,
+    max_depth: float = ...,
+) -> tuple[float, float]: ...
 def calibrated_confidence(
     score: float, kind: Literal["align", "views", "servo", "servo_carried"]
 ) -> float: ...

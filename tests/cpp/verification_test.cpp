@@ -2,6 +2,7 @@
 // on hand-computed cases, and the alternatives of align() for a symmetric box.
 
 #include <spectral_vs/alignment/aligner.hpp>
+#include <spectral_vs/alignment/verdict.hpp>
 #include <spectral_vs/alignment/verification.hpp>
 #include <spectral_vs/rotation/so3.hpp>
 
@@ -143,6 +144,67 @@ Transform true_pose() {
   T.topLeftCorner<3, 3>() = exp_so3(Eigen::Vector3d(0.4, 1.2, -0.5));
   T.topRightCorner<3, 1>() = Eigen::Vector3d(0.03, -0.02, 0.01);
   return T;
+}
+
+// --- The servo's step score ------------------------------------------------------------
+
+// A current view whose returns span x/z and y/z in [-0.5, 0.5] (a 2 x 2 grid at 1 m), and
+// a reference of four points: two inside that field at 1 m, one outside it, one behind.
+struct Field {
+  Points current = Points(4, 3), reference = Points(4, 3);
+  Field() {
+    current << -0.5, -0.5, 1.0, 0.5, -0.5, 1.0, -0.5, 0.5, 1.0, 0.5, 0.5, 1.0;
+    reference << 0.0, 0.0, 1.0, 0.2, 0.1, 2.0, 3.0, 0.0, 1.0, 0.0, 0.0, -1.0;
+  }
+};
+
+TEST(StepScore, IsTheVisibleFitnessFromTheThresholdUpAndReadsNoField) {
+  StepScoreParams params;
+  params.relocalize_fitness = 0.8;
+  const Points none(0, 3);
+  for (const double fitness : {0.8, 0.93, 1.0}) {
+    EXPECT_FALSE(step_score_needs_field(fitness, params));
+    // Empty clouds: a read of the field would give a share of 0, and a score under 1.
+    const StepScore s = step_score(fitness, false, none, Transform::Identity(), none, params);
+    EXPECT_EQ(s.score, fitness);
+    EXPECT_EQ(s.confidence, calibrated_confidence(fitness, RegistrationKind::servo_step));
+    EXPECT_EQ(step_score(fitness, true, none, Transform::Identity(), none, params).confidence,
+              calibrated_confidence(fitness, RegistrationKind::servo_carried));
+  }
+}
+
+TEST(StepScore, UnderTheThresholdDividesByTheShareInTheFieldAtLeastTheFloor) {
+  const Field field;
+  StepScoreParams params;
+  params.relocalize_fitness = 0.8;
+  params.min_field_share = 0.3;
+  EXPECT_TRUE(step_score_needs_field(0.6, params));
+  // Two of the four reference points are in the field: 0.6 / 0.5.
+  EXPECT_NEAR(
+      step_score(0.6, false, field.reference, Transform::Identity(), field.current, params).score,
+      1.0, 1e-12);
+  EXPECT_NEAR(
+      step_score(0.3, false, field.reference, Transform::Identity(), field.current, params).score,
+      0.6, 1e-12);
+  // Nearer than max_depth only: one in the field, a share of 0.25 counts as 0.3.
+  params.max_depth = 1.5;
+  EXPECT_NEAR(
+      step_score(0.15, false, field.reference, Transform::Identity(), field.current, params).score,
+      0.5, 1e-12);
+  // Moved 10 m aside, none is in the field: the floor.
+  Transform aside = Transform::Identity();
+  aside(0, 3) = 10.0;
+  const StepScore far = step_score(0.15, true, field.reference, aside, field.current, params);
+  EXPECT_NEAR(far.score, 0.5, 1e-12);
+  EXPECT_EQ(far.confidence, calibrated_confidence(far.score, RegistrationKind::servo_carried));
+}
+
+TEST(StepScore, ReadingTheFieldRefusesWhatFieldShareRefuses) {
+  const Field field;
+  Points bad = field.current;
+  bad(0, 0) = std::nan("");
+  EXPECT_THROW(step_score(0.5, false, field.reference, Transform::Identity(), bad, {}),
+               std::invalid_argument);
 }
 
 TEST(AlignAlternatives, ABoxReportsItsFourHalfTurnPoses) {

@@ -1,6 +1,8 @@
 #include "alignment/verifier.hpp"
 #include "alignment/normal_directions.hpp"
 
+#include <spectral_vs/alignment/verdict.hpp>
+
 #include "common/checks.hpp"
 
 #include <algorithm>
@@ -176,6 +178,21 @@ double field_share(const Points& reference_points, const Transform& T_current_re
     inside += u >= u_low && u <= u_high && v >= v_low && v <= v_high;
   }
   return double(inside) / double(reference_points.rows());
+}
+
+StepScore step_score(double visible_fitness, bool carried, const Points& reference_points,
+                     const Transform& T_current_reference, const Points& current_points,
+                     const StepScoreParams& params) {
+  StepScore out;
+  out.score = visible_fitness;
+  if (step_score_needs_field(visible_fitness, params)) {
+    const double share =
+        field_share(reference_points, T_current_reference, current_points, params.max_depth);
+    out.score = std::min(1.0, visible_fitness / std::max(share, params.min_field_share));
+  }
+  out.confidence = calibrated_confidence(
+      out.score, carried ? RegistrationKind::servo_carried : RegistrationKind::servo_step);
+  return out;
 }
 
 PoseVerification verify_pose(const PointCloud& model, const PointCloud& scene,

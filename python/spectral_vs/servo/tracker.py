@@ -10,23 +10,13 @@ import math
 
 import numpy as np
 
-from spectral_vs._core import (
-    AlignResult,
-    ModelAligner,
-    PointCloud,
-    calibrated_confidence,
-    field_share,
-)
+from spectral_vs._core import AlignResult, ModelAligner, PointCloud, step_score
 from spectral_vs.poses import pose_error
 from spectral_vs.servo.estimate import TrackedEstimate
 from spectral_vs.servo.law import _rigid_inverse
 from spectral_vs.servo.plane_turn import _PlaneTurn
 from spectral_vs.servo.records import ServoRecord
 from spectral_vs.servo.reference import ServoReference
-
-#: The score of an estimate is its fitness over the share of the reference in the
-#: field, but at least over this share (the extreme starts keep 30% in the field).
-_MIN_FIELD_SHARE = 0.3
 
 
 class Tracker:
@@ -105,16 +95,16 @@ class Tracker:
             T = self.turned(cloud, scene, T)
         else:
             self.last_turn = 0.0
-        # fitness / share >= fitness: the share is needed only under the threshold.
-        record.score = (
-            record.visible_fitness
-            if record.visible_fitness >= p.relocalization.relocalize_fitness
-            else self._field_score(T, record.visible_fitness, cloud)
-        )
-        # The confidence is of the estimate the step keeps: a carried one did not take the
-        # registration, and is calibrated apart.
-        record.confidence = calibrated_confidence(
-            record.score, "servo_carried" if record.carried else "servo"
+        # The score and the confidence are of the estimate the step keeps: a carried one did
+        # not take the registration, and is calibrated apart (spectral_vs.step_score).
+        record.score, record.confidence = step_score(
+            record.visible_fitness,
+            record.carried,
+            self.reference.occlusion_points,
+            T,
+            cloud.points,
+            p.relocalization.relocalize_fitness,
+            max_depth=p.registration.max_depth,
         )
         if record.carried:
             assert guess is not None
@@ -185,20 +175,6 @@ class Tracker:
         c = self.reference.centroid
         moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
         return bool(np.abs(moved).max() <= 0.5 * self.params.registration.tracking_translation)
-
-    def _field_score(self, T: np.ndarray, fitness: float, cloud: PointCloud) -> float:
-        """``fitness`` over the share of the reference that ``T`` puts inside the field of
-        ``cloud`` (its points' bounds in x/z and y/z, nearer than ``max_depth``; at least
-        ``_MIN_FIELD_SHARE``), in [0, 1]."""
-        share = field_share(
-            self.reference.occlusion_points,
-            T,
-            np.asarray(cloud.points),
-            self.params.registration.max_depth,
-        )
-        # An estimate that puts the reference out of the field is not trusted for fitting
-        # the little it leaves in view.
-        return float(min(1.0, fitness / max(share, _MIN_FIELD_SHARE)))
 
 
 def _record_iterations(record: ServoRecord, result: AlignResult) -> None:

@@ -8,6 +8,7 @@
 #include <spectral_vs/representation/point_cloud.hpp>
 
 #include <Eigen/Core>
+#include <limits>
 #include <optional>
 
 namespace spectral_vs {
@@ -76,6 +77,42 @@ double confidence_of(const PoseVerification& verification);
 ///         max_depth that is not > 0.
 double field_share(const Points& reference_points, const Transform& T_current_reference,
                    const Points& current_points, double max_depth);
+
+/// How the servo judges one step's estimate (ServoRecord's score and confidence).
+struct StepScoreParams {
+  /// From this visible fitness up the score is the fitness itself; under it, the fitness
+  /// over the share of the reference in the field (ServoParams.relocalize_fitness).
+  double relocalize_fitness = 0.8;
+  /// That share counts as at least this: the extreme starts keep 30% of the reference in
+  /// the field.
+  double min_field_share = 0.3;
+  /// The field's depth (field_share), metres.
+  double max_depth = std::numeric_limits<double>::infinity();
+};
+
+/// A servo step's score, in [0, 1], and its calibrated confidence.
+struct StepScore {
+  double score = 0.0;
+  double confidence = 0.0;
+};
+
+/// Whether step_score reads the field: a visible fitness under relocalize_fitness.
+inline bool step_score_needs_field(double visible_fitness, const StepScoreParams& params) {
+  return !(visible_fitness >= params.relocalize_fitness);
+}
+
+/// The servo's judgement of a step's estimate T_current_reference from the registration's
+/// fitness over the reference's part no occluder hides (`visible_fitness`, in [0, 1]):
+/// that fitness from params.relocalize_fitness up; under it, the fitness over the share of
+/// `reference_points` that the estimate puts in the field of `current_points` (field_share,
+/// at least params.min_field_share), at most 1: a fit of what little of the reference is
+/// left in view is no sign of a right pose. The confidence is calibrated_confidence of the
+/// score, by the map of a registered estimate, or of one `carried` along the odometry.
+/// Reads neither cloud when the fitness needs no field (step_score_needs_field).
+/// @throws std::invalid_argument as field_share, when it reads the field.
+StepScore step_score(double visible_fitness, bool carried, const Points& reference_points,
+                     const Transform& T_current_reference, const Points& current_points,
+                     const StepScoreParams& params = {});
 
 /// The scene's support of the model at T_scene_model (see PoseVerification).
 /// @throws std::invalid_argument for an empty cloud, missing normals, a voxel_size that
