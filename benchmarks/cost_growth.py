@@ -357,11 +357,8 @@ def figure(results: dict[str, Any]) -> Path:
 
 
 def write_report(results: dict[str, Any]) -> None:
-    text = table(results)
-    print(text)
     figure(results)
-    if report_lib.replace_block(report_lib.BENCHMARKS_DOC, DOC_BLOCK, text):
-        print(f"wrote the table into {report_lib.BENCHMARKS_DOC.relative_to(report_lib.ROOT)}")
+    report_lib.publish(DOC_BLOCK, table(results))
 
 
 def main() -> None:

@@ -551,11 +551,8 @@ def _panel(ax, s: dict) -> None:
 
 
 def write_report(results: dict) -> None:
-    text = table(results)
-    print(text)
     figure(results)
-    if report_lib.replace_block(report_lib.BENCHMARKS_DOC, DOC_BLOCK, text):
-        print(f"wrote the tables into {report_lib.BENCHMARKS_DOC.relative_to(report_lib.ROOT)}")
+    report_lib.publish(DOC_BLOCK, table(results))
 
 
 # --- Command line ---------------------------------------------------------------------------

@@ -47,6 +47,13 @@ def replace_block(path: Path, name: str, text: str) -> bool:
     return True
 
 
+def publish(name: str, text: str, path: Path = BENCHMARKS_DOC) -> None:
+    """Print ``text`` and put it between the ``name`` markers of ``path``."""
+    print(text)
+    if replace_block(path, name, text):
+        print(f"wrote the {name} block into {path.relative_to(ROOT)}")
+
+
 def commit() -> str:
     """Short hash of the checked-out commit, or ``unknown`` outside a git checkout."""
     try:
