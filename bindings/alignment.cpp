@@ -463,7 +463,8 @@ hides) from ``relocalize_fitness`` up; under it, that fitness over the share of
 ``reference_points`` that ``T_current_reference`` puts in the field of ``current_points``
 (``field_share``, at least ``min_field_share``), at most 1. ``confidence`` is
 ``calibrated_confidence(score, 'servo_carried' if carried else 'servo')``. The clouds are
-read only under ``relocalize_fitness``. Raises ValueError as ``field_share`` then.)doc");
+read only under ``relocalize_fitness``. Raises ValueError for a fitness outside [0, 1], a
+``min_field_share`` outside (0, 1], and as ``field_share`` when the field is read.)doc");
 
   m.def(
       "calibrated_confidence",

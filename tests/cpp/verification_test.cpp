@@ -201,6 +201,15 @@ TEST(StepScore, UnderTheThresholdDividesByTheShareInTheFieldAtLeastTheFloor) {
 
 TEST(StepScore, ReadingTheFieldRefusesWhatFieldShareRefuses) {
   const Field field;
+  const Points none(0, 3);
+  StepScoreParams floor_zero;
+  floor_zero.min_field_share = 0.0;
+  for (const double fitness : {std::nan(""), -0.1, 1.5}) {
+    EXPECT_THROW(step_score(fitness, false, none, Transform::Identity(), none, {}),
+                 std::invalid_argument);
+  }
+  EXPECT_THROW(step_score(0.5, false, none, Transform::Identity(), none, floor_zero),
+               std::invalid_argument);
   Points bad = field.current;
   bad(0, 0) = std::nan("");
   EXPECT_THROW(step_score(0.5, false, field.reference, Transform::Identity(), bad, {}),

@@ -1560,6 +1560,26 @@ def _calibrated_confidence(probe: Probe, data: Any) -> None:
     probe("calibrated_confidence", svs.calibrated_confidence, score, kind)
 
 
+@entry("step_score")
+def _step_score(probe: Probe, data: Any) -> None:
+    F = fixtures()
+    points = st.one_of(
+        st.just(np.asarray(F.model.points)), st.just(np.asarray(F.scene.points)), arrays(), wrong
+    )
+    probe(
+        "step_score",
+        svs.step_score,
+        data.draw(st.one_of(st.floats(allow_nan=True, allow_infinity=True), wrong)),
+        data.draw(st.one_of(st.booleans(), wrong)),
+        data.draw(points),
+        data.draw(st.one_of(st.just(F.T), transforms())),
+        data.draw(points),
+        data.draw(sometimes_wrong(reals(0.8, 0.0, 1.0))),
+        min_field_share=data.draw(sometimes_wrong(reals(0.3, 0.0, 1.0))),
+        max_depth=data.draw(sometimes_wrong(reals(3.0, 0.0, float("inf")))),
+    )
+
+
 @entry("pose_covariance")
 def _pose_covariance(probe: Probe, data: Any) -> None:
     F = fixtures()

@@ -183,6 +183,13 @@ double field_share(const Points& reference_points, const Transform& T_current_re
 StepScore step_score(double visible_fitness, bool carried, const Points& reference_points,
                      const Transform& T_current_reference, const Points& current_points,
                      const StepScoreParams& params) {
+  // A NaN fitness would pass for a perfect one (min(1, NaN) is 1).
+  if (!(visible_fitness >= 0.0 && visible_fitness <= 1.0))
+    detail::fail("visible_fitness must be in [0, 1], got ", visible_fitness);
+  if (!(params.relocalize_fitness >= 0.0 && params.relocalize_fitness <= 1.0))
+    detail::fail("relocalize_fitness must be in [0, 1], got ", params.relocalize_fitness);
+  if (!(params.min_field_share > 0.0 && params.min_field_share <= 1.0))
+    detail::fail("min_field_share must be in (0, 1], got ", params.min_field_share);
   StepScore out;
   out.score = visible_fitness;
   if (step_score_needs_field(visible_fitness, params)) {

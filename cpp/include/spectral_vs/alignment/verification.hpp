@@ -109,7 +109,9 @@ inline bool step_score_needs_field(double visible_fitness, const StepScoreParams
 /// left in view is no sign of a right pose. The confidence is calibrated_confidence of the
 /// score, by the map of a registered estimate, or of one `carried` along the odometry.
 /// Reads neither cloud when the fitness needs no field (step_score_needs_field).
-/// @throws std::invalid_argument as field_share, when it reads the field.
+/// @throws std::invalid_argument for a visible_fitness or relocalize_fitness outside
+///         [0, 1], a min_field_share outside (0, 1], and as field_share when it reads the
+///         field.
 StepScore step_score(double visible_fitness, bool carried, const Points& reference_points,
                      const Transform& T_current_reference, const Points& current_points,
                      const StepScoreParams& params = {});
