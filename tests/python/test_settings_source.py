@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from architecture_figures import GROUP_READ, declared_reads, stage_reads, stage_table
 from test_stubs import settable_fields as bound_settable_fields
 
 from spectral_vs import _core
@@ -303,58 +304,6 @@ def test_the_alignment_docs_list_every_group_field() -> None:
 
 
 # --- What each of align()'s stages reads (docs/architecture.md) ---------------------------
-
-STAGE_SOURCES = ROOT / "cpp" / "src" / "alignment"
-ARCHITECTURE_DOC = ROOT / "docs" / "architecture.md"
-#: The groups a stage declares; `scene` (the unit every stage measures in) and the
-#: top-level fields (threads, limits, max_seconds, initial_guess) every stage may read.
-STAGE_GROUPS = ("search", "refinement", "local", "verification")
-GROUP_READ = re.compile(r"params(?:\(\))?\.(" + "|".join(STAGE_GROUPS) + r")\.(\w+)")
-
-
-def stage_reads() -> dict[str, set[tuple[str, str]]]:
-    """Per source file of align()'s stages (not align_views' view_* files), the
-    (group, field) of every AlignParams group it reads."""
-    reads = {}
-    for path in sorted(STAGE_SOURCES.glob("*.[ch]pp")):
-        if path.name.startswith("view_"):
-            continue
-        found = set(GROUP_READ.findall(path.read_text()))
-        if found:
-            reads[path.name] = found
-    return reads
-
-
-def stage_table() -> list[tuple[list[str], str]]:
-    """The rows of docs/architecture.md's stage table: (its files, what it declares)."""
-    text = ARCHITECTURE_DOC.read_text()
-    table = text[text.index("| stage | group |") :].split("\n\n", 1)[0]
-    rows = []
-    for line in table.splitlines()[2:]:
-        stage, declared = line.strip("|").split("|", 1)
-        rows.append((re.findall(r"`(\w+\.[ch]pp)`", stage), declared))
-    return rows
-
-
-def declared_reads(declared: str) -> tuple[set[str], set[tuple[str, str]]]:
-    """What a row's second column names: whole groups (`search`, or `search` followed by a
-    parenthesised list of some of its fields counts as those fields) and single fields
-    (`local.max_translation`)."""
-    groups, fields = set(), set()
-    for match in re.finditer(r"`(\w+)(?:\.(\w+))?`( \(([^)]*)\))?", declared):
-        group, field, _, listed = match.groups()
-        if group not in STAGE_GROUPS:
-            continue
-        if field:
-            fields.add((group, field))
-        else:
-            groups.add(group)
-    for match in re.finditer(r"(?<![`.\w])(" + "|".join(STAGE_GROUPS) + r") \(([^)]*)\)", declared):
-        group, listed = match.groups()
-        fields |= {
-            (group, name.strip()) for name in listed.split(",") if name.strip().isidentifier()
-        }
-    return groups, fields
 
 
 def test_every_stage_reads_only_the_settings_its_row_declares():
