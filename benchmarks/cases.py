@@ -582,6 +582,17 @@ class Case:
         return svs.PointCloud(self.scene_points, self.scene_normals)
 
 
+#: A registration is right within these of the truth (rotation, degrees; the model's
+#: centroid, metres), up to the object's symmetries (:func:`pose_error`): what every
+#: benchmark of these cases counts as a success.
+SUCCESS_DEG, SUCCESS_M = 5.0, 0.010
+
+
+def succeeded(rotation_deg: float, translation_m: float) -> bool:
+    """Errors (:func:`pose_error`) within SUCCESS_DEG and SUCCESS_M."""
+    return bool(rotation_deg < SUCCESS_DEG and translation_m < SUCCESS_M)
+
+
 def pose_error(case: Case, T: np.ndarray) -> tuple[float, float]:
     """(rotation error in degrees, translation error of the model centroid in metres) of
     an estimated T_scene_model, the minimum over the object's symmetries."""

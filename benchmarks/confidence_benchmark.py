@@ -65,7 +65,7 @@ ANGLES = (10, 30, 60, 90, 120, 150, 180)
 CASES_PER_CELL = {f: 1 for f in case_lib.TUNING_FAMILIES} | {
     f: 6 for f in case_lib.HELDOUT_FAMILIES
 }
-SUCCESS_DEG, SUCCESS_M = 5.0, 0.010
+SUCCESS_DEG, SUCCESS_M = case_lib.SUCCESS_DEG, case_lib.SUCCESS_M
 RUNS = ("default", "truncated", "other_object")
 TRUNCATED = {"hypotheses": 2, "refinements": 1}
 PEERS = ("o3d_ransac", "kiss_matcher")

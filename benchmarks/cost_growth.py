@@ -235,7 +235,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                         "scene_points": len(case["scene"][0]), "voxel_m": case["voxel"],
                         "cpu_s": cpu, "wall_s": wall, "rotation_deg": rotation,
                         "translation_m": translation,
-                        "success": bool(rotation < 5.0 and translation < 0.01),
+                        "success": case_lib.succeeded(rotation, translation),
                         "reliable": None if verdict is None else bool(verdict[0]),
                         "status": None if verdict is None else str(verdict[1]),
                     })  # fmt: skip

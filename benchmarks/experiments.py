@@ -56,8 +56,7 @@ CASES_PER_CELL = {"full": 20, "bunny_scan": 20, "partial": 20, "clutter": 20, "m
 SWEEP_CASES = 10  # cases per offset of the translation sweep
 SWEEP_FAMILIES = ("full", "partial", "clutter")
 MODES = {"paper": {"global_search": False}, "ours": {"global_search": True}}
-SUCCESS_DEG = 5.0
-SUCCESS_M = 0.010
+SUCCESS_DEG, SUCCESS_M = case_lib.SUCCESS_DEG, case_lib.SUCCESS_M
 CONVERGENCE_PLOT_CASES = 3  # per family: cases 0..2 at 30 degrees keep their history
 QUICK = {"angles": (30, 120), "cases": 1, "offsets": (0.1,)}
 

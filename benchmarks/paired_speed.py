@@ -125,7 +125,6 @@ ANGLES = (10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0)
 INDEX_BASE = 1000
 CASES, REPEATS = 10, 3
 QUICK_CASES, QUICK_REPEATS = 2, 1
-SUCCESS_DEG, SUCCESS_M = 5.0, 0.010
 #: Issue 36's targets: ours this many times faster than each peer, and its accuracy.
 SPEEDUP_TARGETS = {"o3d_ransac": 5.0, "kiss": 1.5}
 ACCURACY_M = 0.008
@@ -226,7 +225,7 @@ def timed(method: str, case: case_lib.Case, voxel: float) -> dict[str, Any]:
     T, extra = call(method, case, voxel)
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     rotation, translation = case_lib.pose_error(case, T)
-    success = bool(rotation < SUCCESS_DEG and translation < SUCCESS_M)
+    success = case_lib.succeeded(rotation, translation)
     return {"cpu_s": cpu, "wall_s": wall, "rotation_error_deg": rotation,
             "translation_error_m": translation, "success": success, **extra}  # fmt: skip
 
@@ -304,20 +303,15 @@ def run(families: list[str], cases: int, repeats: int, log=print) -> list[dict]:
 # --- Summaries ------------------------------------------------------------------------------
 
 
-def median(values) -> float | None:
-    values = [v for v in values if v is not None]
-    return float(np.median(values)) if values else None
-
-
 def method_stats(records: list[dict]) -> dict:
     """One method on one family: median CPU time, successes, errors of the successes."""
     ok = [r for r in records if r["success"]]
     return {
         "cases": len(records),
         "successes": len(ok),
-        "median_cpu_s": median(r["cpu_s"] for r in records),
-        "median_rotation_error_deg": median(r["rotation_error_deg"] for r in ok),
-        "median_translation_error_m": median(r["translation_error_m"] for r in ok),
+        "median_cpu_s": report_lib.median(r["cpu_s"] for r in records),
+        "median_rotation_error_deg": report_lib.median(r["rotation_error_deg"] for r in ok),
+        "median_translation_error_m": report_lib.median(r["translation_error_m"] for r in ok),
         "unstable_cases": sum(len(set(r["successes_of_runs"])) > 1 for r in records),
     }
 
@@ -356,12 +350,12 @@ def summarize(records: list[dict]) -> list[dict]:
         wrong = [r["case_id"] for r in ours if r["reliable"] and not r["success"]]
         out.append({
             "family": family, "cases": len(ours),
-            "median_voxel_m": median(r["voxel_m"] for r in ours),
+            "median_voxel_m": report_lib.median(r["voxel_m"] for r in ours),
             "methods": stats,
             "ours_reliable": sum(r["reliable"] for r in ours),
             "ours_reliable_wrong": wrong,
             "ours_median_timings_s": {
-                k: median(r["timings_s"][k] for r in ours) for k in ours[0]["timings_s"]
+                k: report_lib.median(r["timings_s"][k] for r in ours) for k in ours[0]["timings_s"]
             } if ours else {},
             **targets(stats),
         })  # fmt: skip
@@ -383,7 +377,7 @@ def frame_comparison(records: list[dict]) -> list[dict]:
         cam, moved = [p[0] for p in pairs], [p[1] for p in pairs]
         rows.append({
             "family": base, "camera_family": camera, "cases": len(pairs),
-            "voxel_m": [median(r["voxel_m"] for r in cam), median(r["voxel_m"] for r in moved)],
+            "voxel_m": [report_lib.median(r["voxel_m"] for r in side) for side in (cam, moved)],
             "max_voxel_change": max(abs(b["voxel_m"] / a["voxel_m"] - 1.0) for a, b in pairs),
             "successes": [sum(r["success"] for r in cam), sum(r["success"] for r in moved)],
             "median_translation_error_m": [

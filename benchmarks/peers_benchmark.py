@@ -59,8 +59,7 @@ DETERMINISM_CASES = 3  # per family, registered a second time by every method
 RANDOM_METHODS = ("o3d_ransac", "o3d_fgr")  # also rerun with another seed
 PEER_METHODS = tuple(m for m in peers.METHODS if m not in ("ours", "paper"))
 LOCAL_PEERS = tuple(m for m in peers.LOCAL_METHODS if m != "paper")
-SUCCESS_DEG = 5.0
-SUCCESS_M = 0.010
+SUCCESS_DEG, SUCCESS_M = case_lib.SUCCESS_DEG, case_lib.SUCCESS_M
 VOXEL = 0.008  # metres: ours' default voxel, used by every method
 QUICK = {"angles": (30, 120), "cases": 1, "determinism": 1}
 SWEEP = {"angles": (10, 30, 60, 90), "cases": 3, "distances": (0.75, 1.0, 1.5, 2.5, 5, 10, 25)}
@@ -200,19 +199,14 @@ def sweep_local_distance(specs: list[case_lib.CaseSpec], log) -> dict:
 # --- Summaries ----------------------------------------------------------------------------
 
 
-def median(values) -> float | None:
-    values = [v for v in values if v is not None]
-    return float(np.median(values)) if values else None
-
-
 def statistics(group: list[dict]) -> dict:
     ok = [r for r in group if r["success"]]
     cpu = [r["cpu_s"] for r in group]
     return {
         "cases": len(group),
         "success_rate": len(ok) / len(group),
-        "median_rotation_error_deg": median(r["rotation_error_deg"] for r in ok),
-        "median_translation_error_m": median(r["translation_error_m"] for r in ok),
+        "median_rotation_error_deg": report_lib.median(r["rotation_error_deg"] for r in ok),
+        "median_translation_error_m": report_lib.median(r["translation_error_m"] for r in ok),
         "median_cpu_s": float(np.median(cpu)),
         "p10_cpu_s": float(np.percentile(cpu, 10)),
         "p90_cpu_s": float(np.percentile(cpu, 90)),

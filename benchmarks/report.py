@@ -47,6 +47,14 @@ def replace_block(path: Path, name: str, text: str) -> bool:
     return True
 
 
+def median(values) -> float | None:
+    """The median of the values that are not None, or None for none."""
+    import numpy as np
+
+    values = [v for v in values if v is not None]
+    return float(np.median(values)) if values else None
+
+
 def publish(name: str, text: str, path: Path = BENCHMARKS_DOC) -> None:
     """Print ``text`` and put it between the ``name`` markers of ``path``."""
     print(text)

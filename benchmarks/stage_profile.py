@@ -27,7 +27,8 @@ import time
 
 import cases as case_lib
 import numpy as np
-from report import BENCHMARKS_DOC, RESULTS, commit, machine, replace_block
+import report as report_lib
+from report import RESULTS, commit, machine
 
 import spectral_vs as svs
 
@@ -132,10 +133,7 @@ def write_profile(rows: dict[str, list[dict]], command: str, what: str, name: st
     (RESULTS / f"{name}.json").write_text(
         json.dumps({"stamp": stamp, "rows": rows}, indent=1) + "\n"
     )
-    text = stamp + "\n\n" + table(rows)
-    print(text)
-    if replace_block(BENCHMARKS_DOC, name, text):
-        print(f"wrote the table into {BENCHMARKS_DOC}")
+    report_lib.publish(name, stamp + "\n\n" + table(rows))
 
 
 def main() -> int:

@@ -301,7 +301,7 @@ void WignerPullback::apply(const Eigen::Matrix3d& R, const ShCoefficients& x, Sh
   turn_about_z(beta, out);
   quarter_turn(out, work_, true);
   turn_about_z(gamma, work_);
-  out = work_;
+  out.swap(work_);  // same size: no copy, and work_ keeps a buffer for the next call
 }
 
 WignerGenerators wigner_generators(int lmax) {
