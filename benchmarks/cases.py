@@ -954,6 +954,28 @@ def clutter_case(spec: CaseSpec, noise: bool = True) -> Case:
     )  # fmt: skip
 
 
+def held_above_table(
+    name: str, lift: float, seed: int = 3
+) -> tuple[svs.PointCloud, svs.PointCloud, np.ndarray, np.ndarray]:
+    """An object held above the table (in a gripper the view leaves out): the object turned
+    40 degrees about the vertical, its lowest point ``lift`` metres above the table, seen
+    from 0.6 m with the sensor's noise. (model, scan, T_scene_model, sensor origin), the
+    scan in the world's frame."""
+    rng = np.random.default_rng(seed)
+    mesh = load_mesh(name)
+    model = sample_surface(mesh, MODEL_SAMPLES, rng)
+    R = axis_angle(np.array([0.0, 0.0, 1.0]), 0.7)
+    T = pose(R, np.array([0.0, 0.0, lift - (mesh.vertices @ R.T)[:, 2].min()]))
+    r = renderer()
+    r.reset()
+    r.add_mesh(mesh.vertices, mesh.faces, T)
+    r.add_box(TABLE_HALF, (0.0, 0.0, -TABLE_HALF[2]))
+    T_world_camera = look_at(T[:3, 3] + np.array([0.35, 0.15, 0.45]), T[:3, 3])
+    depth, _ = r.render(T_world_camera, intrinsics())
+    scan = _scan(depth, T_world_camera, rng)
+    return svs.PointCloud(*model), svs.PointCloud(*scan), T, T_world_camera[:3, 3]
+
+
 def _place_on_table(
     meshes: list[Mesh], rng: np.random.Generator, gap: float = 0.005, area: float = CLUTTER_AREA
 ) -> list[np.ndarray]:

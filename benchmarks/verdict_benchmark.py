@@ -20,10 +20,10 @@ whether it is right, the raw ``score``, and ``confidence``, ``reliable``, ``stat
   mean NEES of the right answers. Read twice when the results carry the verdict's fields
   (``reliable``, ``confidence``, ``covariance``): as the library returned them
   (``library``), and with the calibration above applied to ``score`` (``fitted``:
-  reliable = confidence >= threshold, not ambiguous, status not ``max_seconds`` /
-  ``bad_scale`` / ``no_support``; NEES with the covariance times k), what the library
-  returns once the knots are pasted. Without those fields only the second: the offline
-  emulation, marked ``emulated`` in every table. Written to
+  reliable = confidence >= threshold, not ambiguous, determined, not floating, status not
+  ``max_seconds`` / ``bad_scale`` / ``no_support``; NEES with the covariance times k),
+  what the library returns once the knots are pasted. Without those fields only the
+  second: the offline emulation, marked ``emulated`` in every table. Written to
   ``benchmarks/results/verdict_validation.json``, ``docs/figures/verdict_reliability.png``
   (reliability diagrams), stdout, and between ``<!-- verdict:begin -->`` and
   ``<!-- verdict:end -->`` of ``--doc`` (docs/trust.md by default) when it has them.
@@ -140,6 +140,7 @@ def _verdict_fields(result) -> dict:
         "reliable": None if reliable is None else bool(reliable),
         "status": None if reliable is None else _field(result, "status"),
         "determined": _field(result, "determined"),
+        "rests": _field(result, "rests"),  # align only: False for a floating pose
         "ambiguous": bool(_field(result, "ambiguous") or False),
         "alternatives": 0 if alternatives is None else len(alternatives),
         "covariance": None if covariance is None else np.asarray(covariance).tolist(),
@@ -363,11 +364,13 @@ GATED_STATUSES = ("max_seconds", "bad_scale", "no_support")
 
 def eligible(record: dict) -> bool:
     """Whether an answer can be reliable at all: not ambiguous, determined (the scene pins
-    the pose down), and not stopped by the library's gates (time, voxel scale, no
-    support) when the results name them."""
+    the pose down), not floating (it rests when the scene has a support plane), and not
+    stopped by the library's gates (time, voxel scale, no support) when the results name
+    them."""
     return (
         not record.get("ambiguous", False)
         and record.get("determined") is not False
+        and record.get("rests") is not False
         and record.get("status") not in GATED_STATUSES
     )
 
@@ -832,7 +835,8 @@ MODE_TITLES = {
     "library": "the verdict of the installed library, as it returned it (NEES with its "
     "covariance as returned)",
     "fitted": "the calibration fitted above applied to the raw score: reliable = confidence "
-    ">= its kind's threshold, not ambiguous, status not max_seconds / bad_scale / no_support "
+    ">= its kind's threshold, not ambiguous, determined, not floating, status not max_seconds / "
+    "bad_scale / no_support "
     "(NEES with the covariance times the fitted k). `emulated` marks these figures: the "
     "offline emulation, what the library returns once the knots are pasted",
 }

@@ -238,11 +238,18 @@ reselect_margin : float
     [0, 1] (default 0.1; 1 never reselects). Below 1, so is, in clutter, an alternative
     within 0.01 as confident that explains a share of its object's part of the scene
     larger by over 0.2, else one at least as confident with more inliers.
+expect_resting : bool
+    With global search, in a scene where a support plane is found: objects rest on it or
+    on each other, so a pose that does neither (``AlignResult.rests`` False) is not
+    reliable (status ``'floating'``) and, below a ``reselect_margin`` of 1, gives way to a
+    resting one (default True). False for an object that may hang above the table (held in
+    a gripper).
 )doc");
   define_settings(verification)
       .def_readwrite("verify", &VerificationParams::verify)
       .def_readwrite("max_alternatives", &VerificationParams::max_alternatives)
-      .def_readwrite("reselect_margin", &VerificationParams::reselect_margin);
+      .def_readwrite("reselect_margin", &VerificationParams::reselect_margin)
+      .def_readwrite("expect_resting", &VerificationParams::expect_resting);
 }
 
 void define_align_params(py::module_& m) {
@@ -577,12 +584,16 @@ that keeps unconstrained directions finite (docs/trust.md).
                     "the voxel in range). The one field to check before acting on the pose.")
       .def_property_readonly(
           "status", [](const AlignResult& r) { return std::string(verdict_name(r.status)); },
-          "The verdict in one word: 'reliable', 'ambiguous', 'doubtful', 'undetermined', "
-          "'no_support', "
+          "The verdict in one word: 'reliable', 'ambiguous', 'doubtful', 'floating', "
+          "'undetermined', 'no_support', "
           "'max_seconds', 'bad_scale' or 'unverified' (docs/trust.md).")
       .def_readonly("determined", &AlignResult::determined,
                     "True when the scene pins the pose down: two standard deviations of "
                     "the covariance within 5 degrees and, at the model's centroid, 10 mm.")
+      .def_readonly("rests", &AlignResult::rests,
+                    "True unless a support plane was found and the pose neither touches it "
+                    "nor stands on an upward-facing surface of the scene (a flat object flush "
+                    "with another object's face, the rest of it inside that object).")
       .def_readonly("confidence", &AlignResult::confidence,
                     "The probability that the pose is right (within 5 degrees and 10 mm), in "
                     "[0, 1]: score through the calibration map fitted on the calibration set.")

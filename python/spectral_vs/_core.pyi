@@ -501,6 +501,7 @@ class VerificationParams:
         verify: bool = ...,
         max_alternatives: int = ...,
         reselect_margin: float = ...,
+        expect_resting: bool = ...,
     ) -> None: ...
     def __eq__(self, other: object) -> bool: ...
     __hash__: ClassVar[None]  # type: ignore[assignment]
@@ -509,6 +510,7 @@ class VerificationParams:
     verify: bool  # without global search; False: confidence, inliers stay 0
     max_alternatives: int
     reselect_margin: float  # confidence, in [0, 1]; 1: never reselect
+    expect_resting: bool  # False: a pose above the table is not floating
 
 class AlignParams:
     """Settings of spectral_vs.align, grouped by stage (scene, local, search, refinement,
@@ -552,6 +554,7 @@ class AlignParams:
         verify: bool = ...,
         max_alternatives: int = ...,
         reselect_margin: float = ...,
+        expect_resting: bool = ...,
         initial_guess: npt.ArrayLike = ...,
         threads: int = ...,
         max_seconds: float = ...,
@@ -615,6 +618,7 @@ class AlignParams:
     verify: bool  # without global search; False: confidence, inliers stay 0
     max_alternatives: int
     reselect_margin: float  # confidence, in [0, 1]; 1: never reselect
+    expect_resting: bool  # False: a pose above the table is not floating
     # The top-level fields.
     @property
     def initial_guess(self) -> _Array: ...  # (4, 4) T_scene_model
@@ -707,11 +711,13 @@ class AlignResult:
     @property
     def reliable(self) -> bool: ...
     @property
-    # "reliable", "ambiguous", "doubtful", "undetermined", "no_support", "max_seconds", "bad_scale",
-    # "unverified"
+    # "reliable", "ambiguous", "doubtful", "floating", "undetermined", "no_support", "max_seconds",
+    # "bad_scale", "unverified"
     def status(self) -> str: ...
     @property
     def determined(self) -> bool: ...
+    @property
+    def rests(self) -> bool: ...  # False: a support plane was found and the pose floats
     @property
     def confidence(self) -> float: ...  # calibrated, in [0, 1]
     @property

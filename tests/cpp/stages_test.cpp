@@ -102,6 +102,7 @@ TEST(Hypotheses, PlacedRotationsRefineEachCandidatePlaceItAndScoreItInTheSearchO
                              stages.search_voxel, params.scene.occupancy, phase_params(params),
                              params.limits);
   const Eigen::Vector3d start_offset = start - stages.moving.centroid();
+  const auto place = [&](const Points& at) { return placement.estimate(at).shift; };
   std::vector<int> scored;
   const auto score = [&](Hypothesis& h) {
     scored.push_back(h.index);
@@ -109,7 +110,7 @@ TEST(Hypotheses, PlacedRotationsRefineEachCandidatePlaceItAndScoreItInTheSearchO
   };
   const std::vector<Hypothesis> placed =
       placed_rotations(candidates, stages.prepared.correlation, RotationRefineParams(),
-                       stages.moving, placement, start_offset, Clock::time_point::max(), score);
+                       stages.moving, start_offset, Clock::time_point::max(), place, score);
   ASSERT_EQ(placed.size(), 2u);
   EXPECT_EQ(scored, (std::vector<int>{0, 1}));
   EXPECT_EQ(placed[0].index, 0);
@@ -123,7 +124,7 @@ TEST(Hypotheses, PlacedRotationsRefineEachCandidatePlaceItAndScoreItInTheSearchO
   scored.clear();
   const std::vector<Hypothesis> late =
       placed_rotations(candidates, stages.prepared.correlation, RotationRefineParams(),
-                       stages.moving, placement, start_offset, Clock::time_point::min(), score);
+                       stages.moving, start_offset, Clock::time_point::min(), place, score);
   ASSERT_EQ(late.size(), 1u);
   EXPECT_EQ(late[0].pose.offset, placed[0].pose.offset);
   EXPECT_EQ(scored, (std::vector<int>{0}));

@@ -44,6 +44,10 @@ TEST(VerdictOf, NamesTheFirstReasonNotToAct) {
   EXPECT_EQ(verdict_of(in), Verdict::reliable);
   in.ambiguous = true;
   EXPECT_EQ(verdict_of(in), Verdict::ambiguous);
+  in.determined = false;
+  EXPECT_EQ(verdict_of(in), Verdict::undetermined);
+  in.rests = false;
+  EXPECT_EQ(verdict_of(in), Verdict::floating);  // floating before undetermined
   in.confidence = kReliableConfidence - 1e-9;
   EXPECT_EQ(verdict_of(in), Verdict::doubtful);  // low confidence first, then ambiguity
   in.supported = false;
@@ -53,6 +57,7 @@ TEST(VerdictOf, NamesTheFirstReasonNotToAct) {
   in.timed_out = true;
   EXPECT_EQ(verdict_of(in), Verdict::max_seconds);
   EXPECT_STREQ(verdict_name(Verdict::no_support), "no_support");
+  EXPECT_STREQ(verdict_name(Verdict::floating), "floating");
 }
 
 TEST(VoxelInRange, IsHalfToAThousandthOfTheExtent) {

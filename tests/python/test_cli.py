@@ -258,6 +258,27 @@ def test_a_wrong_object_exits_1(case, data_dir, capsys):
     assert report["status"] != "reliable"
 
 
+def test_a_floating_pose_exits_1_unless_the_object_may_float(capsys, tmp_path):
+    """The duck held 80 mm above the table: right, but it neither rests on the table nor
+    stands on anything, so `floating` (exit 1, the reason printed) unless --may-float."""
+    pytest.importorskip("pybullet")  # the meshes come with pybullet_data
+    import cases
+
+    model, scan, T, origin = cases.held_above_table("duck", 0.08)
+    svs.save_cloud(tmp_path / "duck.pcd", model)
+    svs.save_cloud(tmp_path / "scan.pcd", scan)
+    argv = ["align", str(tmp_path / "duck.pcd"), str(tmp_path / "scan.pcd"), "--quiet"]
+    argv += ["--sensor-origin", *map(str, origin), "--scene-view", "single_view"]
+    code, out, _ = run(capsys, *argv)
+    assert code == 1
+    assert "floating" in out and "neither rests on the table" in out
+    code, out, _ = run(capsys, *argv, "--may-float", "--json")
+    report = json.loads(out)
+    assert code == 0 and report["status"] == "reliable"
+    rotation_deg, error_mm = errors(np.array(report["T_scene_model"]), T, model.points.mean(axis=0))
+    assert rotation_deg < 1.0 and error_mm < 1.0
+
+
 def test_missing_file_exits_2_and_names_it(case, capsys, tmp_path):
     missing = tmp_path / "nowhere.pcd"
     code, out, err = run(capsys, "align", case["model"], str(missing))

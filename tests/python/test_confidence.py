@@ -285,6 +285,43 @@ def test_in_clutter_a_pose_that_does_not_rest_gives_way_to_one_that_does():
     assert result.confidence > refined.confidence - 0.1
 
 
+def test_a_wrong_pose_that_floats_is_not_reliable():
+    # The wall (a tuning-side box 130 x 70 x 12 mm standing on a long edge) among tuning
+    # objects: the returned pose lies flush with another object's face, 355 mm from the
+    # truth, neither touching the table nor standing on anything. Measured before the
+    # floating verdict: 22 degrees off, score 0.95, reliable.
+    case = cases.in_camera_frame(cases.make_case(cases.CaseSpec("clutter", "wall", 10.0, 3)))
+    result = svs.align(case.model_cloud(), case.scene_cloud(), threads=1)
+    rotation, translation = cases.pose_error(case, result.T_scene_model)
+    assert rotation > 10.0 and translation > 100 * MM
+    assert not result.rests
+    assert result.status == "floating" and not result.reliable
+    assert result.confidence >= svs.RELIABLE_CONFIDENCE  # the score alone took it for right
+
+
+def errors(model: svs.PointCloud, T_true: np.ndarray, T: np.ndarray) -> tuple[float, float]:
+    """Degrees, metres (at the model's centroid)."""
+    D = np.linalg.inv(T_true) @ T
+    degrees = math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
+    centre = np.append(model.points.mean(axis=0), 1.0)
+    return degrees, float(np.linalg.norm((T @ centre - T_true @ centre)[:3]))
+
+
+@pytest.mark.parametrize("lift", [0.0, 0.08])
+def test_an_object_held_above_the_table_floats_unless_resting_is_not_expected(lift):
+    model, scan, T_true, origin = cases.held_above_table("duck", lift)
+    view = {"sensor_origin": origin, "scene_view": "single_view", "threads": 1}
+    for expect_resting in (True, False):
+        result = svs.align(model, scan, expect_resting=expect_resting, **view)
+        rotation, translation = errors(model, T_true, result.T_scene_model)
+        assert rotation < 1.0 and translation < 1 * MM  # right either way
+        assert result.rests == (lift == 0.0)
+        # On the table it is reliable; 80 mm above it floats, unless told it may.
+        floats = lift > 0.0 and expect_resting
+        assert result.status == ("floating" if floats else "reliable")
+        assert result.reliable == (not floats)
+
+
 def test_reselect_margin_is_checked():
     case = cases.make_case(cases.CaseSpec("full", "jenga", 30.0, 0))
     for margin in (-0.1, 1.5, float("nan")):

@@ -331,3 +331,13 @@ def test_the_stage_reads_parser_sees_a_read_and_a_declaration():
         "`search` (hypotheses); `local.rotation_step`, the switches: `refinement` (polish, icp)"
     )
     assert groups == {"search", "refinement"} and ("local", "rotation_step") in fields
+
+
+def test_the_servo_scores_steps_at_the_relocalization_threshold_the_cpp_default_states():
+    # StepScoreParams (C++, for embedders) and RelocalizationParams (the servo, Python)
+    # state the same threshold twice: the C++ default must follow the servo's.
+    from spectral_vs.servo.fault_settings import RelocalizationParams
+
+    fields = {f.name: f for f in cpp_fields(Bound("alignment/verification.hpp", "StepScoreParams"))}
+    cpp = float(fields["relocalize_fitness"].default)
+    assert cpp == RelocalizationParams().relocalize_fitness

@@ -10,6 +10,7 @@
 #include "alignment/alternatives.hpp"
 #include "alignment/hypotheses.hpp"
 #include "alignment/part_coverage.hpp"
+#include "alignment/point_sets.hpp"
 #include "alignment/prepared.hpp"
 #include "alignment/refinement.hpp"
 #include "alignment/reselection.hpp"
@@ -43,7 +44,7 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
   const Pose start = moving.pose_of(params.initial_guess);
   SceneTranslation whole_scene =
       params.local.max_translation > 0.0
-          ? SceneTranslation(prepared.scene_map, box_of(moving.move(start)),
+          ? SceneTranslation(prepared.scene_map, points_box(moving.move(start)),
                              params.local.max_translation, params.scene.voxel_size,
                              params.scene.occupancy, phase_params(params), params.limits)
           : SceneTranslation(prepared.scene_map, moving.centre(start), moving.reach(),
@@ -211,9 +212,13 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
     if (reselect(problem, prepared, model, coverage, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
-    if (prepared.plane && rest_on_support(problem, prepared, model, verifier, best))
+    if (prepared.plane && params.verification.expect_resting &&
+        rest_on_support(problem, prepared, model, verifier, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
   }
+  if (prepared.plane)
+    best.rests = RestingCheck(prepared.searched, *prepared.plane, params.scene.voxel_size)
+                     .rests(model, best.T_scene_model);
   return best;
 }
 
@@ -241,7 +246,7 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   const Clock::time_point judged = Clock::now();
   if (params.verification.verify || params.search.global_search) {
     judge(result, model, prepared.verifier, typical_size(model.points()),
-          typical_size(scene.points()));
+          typical_size(scene.points()), params.verification.expect_resting);
   } else {
     leave_unjudged(result);
   }

@@ -89,8 +89,9 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
   RotationRefineParams refine;
   refine.newton = params.local.rotation_step == RotationStep::newton;
   std::vector<Hypothesis> hypotheses = placed_rotations(
-      candidates, correlation, refine, problem.model, coarse, start - problem.model.centroid(),
-      problem.deadline, [&](Hypothesis& hypothesis) {
+      candidates, correlation, refine, problem.model, start - problem.model.centroid(),
+      problem.deadline, [&](const Points& at) { return coarse.estimate(at).shift; },
+      [&](Hypothesis& hypothesis) {
         hypothesis.fitness = problem.model.fitness(problem.verifier, hypothesis.pose, search_voxel);
       });
   rank(hypotheses);

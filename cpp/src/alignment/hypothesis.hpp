@@ -36,17 +36,17 @@ inline void rank(std::vector<Hypothesis>& hypotheses) {
 }
 
 /// The rotations of an SO(3) search, in its order, each refined on `correlation` and
-/// placed by `placement` from `start_offset` (the model's offset before the shift), then
-/// scored by `score(Hypothesis&)`. The best-correlated come first: past `deadline` the
-/// rest are left out (never the first).
-template <typename Score>
+/// placed from `start_offset` (the model's offset before the shift) by the shift
+/// `place(points)` returns for the model's points there (metres: a phase correlation,
+/// SceneTranslation::estimate), then scored by `score(Hypothesis&)`. The best-correlated
+/// come first: past `deadline` the rest are left out (never the first).
+template <typename Place, typename Score>
 std::vector<Hypothesis> placed_rotations(const std::vector<RotationCandidate>& candidates,
                                          So3Correlation& correlation,
                                          const RotationRefineParams& refine, MovingModel& model,
-                                         SceneTranslation& placement,
                                          const Eigen::Vector3d& start_offset,
                                          std::chrono::steady_clock::time_point deadline,
-                                         Score&& score) {
+                                         Place&& place, Score&& score) {
   std::vector<Hypothesis> placed;
   for (std::size_t h = 0; h < candidates.size(); ++h) {
     if (h > 0 && std::chrono::steady_clock::now() > deadline) break;
@@ -54,7 +54,7 @@ std::vector<Hypothesis> placed_rotations(const std::vector<RotationCandidate>& c
     hypothesis.index = int(h);
     hypothesis.pose.R = refine_rotation(correlation, candidates[h].R, refine).R;
     hypothesis.pose.offset = start_offset;
-    hypothesis.pose.offset += placement.estimate(model.move(hypothesis.pose)).shift;
+    hypothesis.pose.offset += place(model.move(hypothesis.pose));
     score(hypothesis);
     placed.push_back(hypothesis);
   }

@@ -121,8 +121,7 @@ IcpOutcome refine_point_to_plane(const PointCloud& model, const PointCloud& scen
   const Eigen::Matrix3d R = T_scene_model.topLeftCorner<3, 3>();
   const Eigen::Vector3d t = T_scene_model.topRightCorner<3, 1>();
   const Points moved_at_start = (model.points() * R.transpose()).rowwise() + t.transpose();
-  Eigen::AlignedBox3d around(moved_at_start.colwise().minCoeff().transpose(),
-                             moved_at_start.colwise().maxCoeff().transpose());
+  Eigen::AlignedBox3d around = points_box(moved_at_start);
   // Room for the motion of the steps: a few max_distances.
   around.min().array() -= 4.0 * settings.max_distance;
   around.max().array() += 4.0 * settings.max_distance;

@@ -70,9 +70,7 @@ struct ModelAligner::Impl {
   // The scene's voxels and spectrum on the bounded grid around the model's start; the
   // FFT plans and buffers are kept while the grid's size stays the same.
   GridSpec place_grid(const PointCloud& scene, const Pose& start) {
-    const Points& at_start = move(start);
-    const Eigen::AlignedBox3d model_box(at_start.colwise().minCoeff().transpose(),
-                                        at_start.colwise().maxCoeff().transpose());
+    const Eigen::AlignedBox3d model_box = detail::points_box(move(start));
     // Only the scene points a bounded shift can reach enter the grid (as in align()).
     const Points in_reach =
         detail::points_in_reach(scene.points(), model_box, params.local.max_translation);
@@ -179,8 +177,9 @@ struct ModelAligner::Impl {
     result.voxel_size = voxel_size;
     if (params.verification.verify) {
       detail::set_verification(result, verifier.verify(model, result.T_scene_model));
+      // No support plane is looked for around a tracked model: its pose always rests.
       detail::judge(result, model, verifier, detail::typical_size(model.points()),
-                    detail::typical_size(scene.points()));
+                    detail::typical_size(scene.points()), params.verification.expect_resting);
     } else {
       detail::leave_unjudged(result);
     }

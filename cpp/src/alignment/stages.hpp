@@ -84,11 +84,6 @@ class StageTimer {
 /// The time limit of params.max_seconds has passed.
 inline bool expired(const Problem& problem) { return Clock::now() > problem.deadline; }
 
-inline Eigen::AlignedBox3d box_of(const Points& points) {
-  return Eigen::AlignedBox3d(points.colwise().minCoeff().transpose(),
-                             points.colwise().maxCoeff().transpose());
-}
-
 /// A guess's neighbourhood (GlobalSearchParams::guess_angle_deg, guess_distance) is set.
 bool has_neighbourhood(const GlobalSearchParams& search);
 

@@ -108,6 +108,7 @@ Verdict verdict_of(const VerdictInputs& in) {
   if (!in.scale_ok) return Verdict::bad_scale;
   if (!in.supported) return Verdict::no_support;
   if (in.confidence < kReliableConfidence) return Verdict::doubtful;
+  if (!in.rests) return Verdict::floating;
   if (!in.determined) return Verdict::undetermined;
   if (in.ambiguous) return Verdict::ambiguous;
   return Verdict::reliable;
@@ -123,6 +124,8 @@ const char* verdict_name(Verdict verdict) {
       return "doubtful";
     case Verdict::undetermined:
       return "undetermined";
+    case Verdict::floating:
+      return "floating";
     case Verdict::no_support:
       return "no_support";
     case Verdict::max_seconds:
@@ -273,7 +276,7 @@ Conclusion conclude(VerdictInputs inputs, const PoseCovariance& covariance,
 }
 
 void judge(AlignResult& result, const PointCloud& model, const Verifier& verifier,
-           double model_extent, double scene_extent) {
+           double model_extent, double scene_extent, bool expect_resting) {
   result.converged = ended_normally(result.stop_reason);
   result.score = result.confidence;
   result.confidence = calibrated_confidence(result.score, RegistrationKind::model_to_scene);
@@ -296,6 +299,7 @@ void judge(AlignResult& result, const PointCloud& model, const Verifier& verifie
   inputs.supported = result.inliers > 0;
   inputs.timed_out = result.stop_reason == AlignStopReason::max_seconds;
   inputs.scale_ok = voxel_in_range(result.voxel_size, model_extent);
+  inputs.rests = result.rests || !expect_resting;
   const Conclusion c = conclude(inputs, result.covariance,
                                 result.T_scene_model.topLeftCorner<3, 3>() * model.centroid() +
                                     result.T_scene_model.topRightCorner<3, 1>());

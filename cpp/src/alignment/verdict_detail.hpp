@@ -65,9 +65,10 @@ Conclusion conclude(VerdictInputs inputs, const PoseCovariance& covariance,
 /// The verdict stage of align() and ModelAligner, last: `result` verified by `verifier`
 /// (its score and alternatives' scores set) gets its calibrated confidence, covariance,
 /// status and `reliable`; `converged` says whether the optimisation ended normally.
-/// `model_extent`, `scene_extent`: typical sizes, metres.
+/// `model_extent`, `scene_extent`: typical sizes, metres. With `expect_resting` a pose
+/// that does not rest (result.rests false) is floating.
 void judge(AlignResult& result, const PointCloud& model, const Verifier& verifier,
-           double model_extent, double scene_extent);
+           double model_extent, double scene_extent, bool expect_resting);
 
 /// The verdict of a result whose verification was turned off: unverified, not reliable.
 void leave_unjudged(AlignResult& result);

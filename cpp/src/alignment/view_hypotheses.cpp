@@ -66,20 +66,19 @@ void add_window_hypotheses(const Views& views, const PointCloud& window, double 
   search.threads = views.params.threads;
   RotationRefineParams refine;
   refine.max_iterations = kRotationRefineIterations;
-  for (const auto& candidate :
-       so3_search(coefficients, views.reference_coefficients, views.params.bandwidth, search)) {
-    Hypothesis hypothesis;
-    hypothesis.index = first_index + int(out.size());
-    hypothesis.pose.R = refine_rotation(correlation, candidate.R, refine).R;
-    hypothesis.pose.offset = window.centroid() - views.model.centroid();
-    const Points& at_start = views.model.move(hypothesis.pose);
-    const Eigen::AlignedBox3d start_box(at_start.colwise().minCoeff().transpose(),
-                                        at_start.colwise().maxCoeff().transpose());
-    SceneTranslation placement(views.map, start_box, kWindowRoom * side,
+  // Each rotation's grid is around the model as it starts, turned: its own placement.
+  const auto place = [&](const Points& at_start) {
+    SceneTranslation placement(views.map, points_box(at_start), kWindowRoom * side,
                                views.scale.search_voxel_size, views.params.occupancy,
                                detail::phase_params(views.loop), views.params.limits);
-    hypothesis.pose.offset += placement.estimate(at_start).shift;
-    check_hypothesis(views, hypothesis);
+    return placement.estimate(at_start).shift;
+  };
+  const int first = first_index + int(out.size());
+  for (Hypothesis& hypothesis : placed_rotations(
+           so3_search(coefficients, views.reference_coefficients, views.params.bandwidth, search),
+           correlation, refine, views.model, window.centroid() - views.model.centroid(),
+           views.deadline, place, [&](Hypothesis& h) { check_hypothesis(views, h); })) {
+    hypothesis.index += first;
     out.push_back(hypothesis);
   }
 }
@@ -184,16 +183,15 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
   // room for the shift of two views' centroids (which a rotation of the camera moves).
   Pose centred;
   centred.offset = start - views.model.centroid();
-  const Points& at_start = views.model.move(centred);
-  const Eigen::AlignedBox3d start_box(at_start.colwise().minCoeff().transpose(),
-                                      at_start.colwise().maxCoeff().transpose());
-  SceneTranslation placement(views.map, start_box, kPlacementRoom * views.scale.extent,
-                             views.scale.search_voxel_size, views.params.occupancy,
-                             detail::phase_params(views.loop), views.params.limits);
+  SceneTranslation placement(views.map, points_box(views.model.move(centred)),
+                             kPlacementRoom * views.scale.extent, views.scale.search_voxel_size,
+                             views.params.occupancy, detail::phase_params(views.loop),
+                             views.params.limits);
   RotationRefineParams refine;
   refine.max_iterations = kRotationRefineIterations;
   std::vector<Hypothesis> out = placed_rotations(
-      candidates, views.correlation, refine, views.model, placement, centred.offset, views.deadline,
+      candidates, views.correlation, refine, views.model, centred.offset, views.deadline,
+      [&](const Points& at) { return placement.estimate(at).shift; },
       [&](Hypothesis& hypothesis) { check_hypothesis(views, hypothesis); });
   rank(out);
   return out;

@@ -42,9 +42,7 @@ ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
   result.T_current_reference = views.model.transform_of(hypothesis.pose);
   result.support = hypothesis.support;
   Pose pose = hypothesis.pose;
-  const Points& at_start = views.model.move(pose);
-  const Eigen::AlignedBox3d box(at_start.colwise().minCoeff().transpose(),
-                                at_start.colwise().maxCoeff().transpose());
+  const Eigen::AlignedBox3d box = points_box(views.model.move(pose));
   // A hypothesis that moved the reference off the current view has nothing to refine on
   // (and its grid, spanning both, could be of any size).
   if (!box.intersects(bounding_box(views.map.cloud()))) return result;

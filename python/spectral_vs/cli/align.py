@@ -168,6 +168,13 @@ def _add_start_settings(settings: Any) -> None:
         "saw), seen from all sides (a full model, a fused map), or auto: detected "
         "(default: auto)",
     )
+    settings.add_argument(
+        "--may-float",
+        action="store_true",
+        help="the object may hang above the table (held in a gripper): a pose that neither "
+        "rests on the scene's support plane nor stands on anything is not 'floating' "
+        "(expect_resting=False)",
+    )
 
 
 def _add_output_arguments(output: Any) -> None:
@@ -262,6 +269,7 @@ def _settings(args: argparse.Namespace, initial: np.ndarray | None) -> svs.Align
     settings.voxel_size = 0.0 if args.voxel_size is None else args.voxel_size
     settings.sensor_origin = sensor_origin_of(args)
     settings.scene_view = args.scene_view
+    settings.expect_resting = not args.may_float
     settings.bandwidth = args.bandwidth
     settings.global_search = not args.paper
     settings.threads = args.threads

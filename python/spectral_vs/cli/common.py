@@ -33,6 +33,9 @@ VERDICT_REASONS = {
     "ambiguous": "other poses fit about as well (a symmetric object, or a view that hides "
     "what tells them apart)",
     "doubtful": "the scene supports the pose too little",
+    "floating": "the pose neither rests on the table nor stands on anything (an object "
+    "flush with another's face, the rest of it inside that object); pass "
+    "expect_resting=False for an object held above the table",
     "undetermined": "the scene leaves a direction of the pose free (a plane on a plane): "
     "its covariance is wider than 5 degrees or 10 mm",
     "no_support": "the scene supports no part of the answer (nothing shared)",

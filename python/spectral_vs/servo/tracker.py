@@ -73,7 +73,7 @@ class Tracker:
         record.fitness = float(result.fitness)
         # An occluder lowers the fitness by the share of the reference it hides: every
         # test below reads the fitness over the rest.
-        record.visible_fitness = min(1.0, record.fitness / max(1.0 - hidden, 1e-9))
+        record.visible_fitness = visible_fitness(record.fitness, hidden)
         # Where the registration fits poorly the views share too little for Algorithm 1's
         # step: the EGI correlation of two partial views peaks 10-20 degrees off the truth,
         # and far from the goal the phase correlation's shift leaps by tens of mm from step
@@ -153,7 +153,7 @@ class Tracker:
             # Once locked on, a poor fit may mean the answer lies beyond the tracking bound
             # (the camera or the scene jumped): the full search decides, and the watchdog
             # sees the jump. Before, a poor fit is the relocalization's to judge.
-            visible = result.fitness / max(1.0 - hidden, 1e-9)
+            visible = visible_fitness(result.fitness, hidden)
             tracking = not self.tracked.armed or visible >= self.params.watchdog.watchdog_fitness
         if not tracking:
             scene, result = self.register(cloud, guess, self.reference.aligner)
@@ -175,6 +175,12 @@ class Tracker:
         c = self.reference.centroid
         moved = predicted[:3, :3] @ c + predicted[:3, 3] - (start[:3, :3] @ c + start[:3, 3])
         return bool(np.abs(moved).max() <= 0.5 * self.params.registration.tracking_translation)
+
+
+def visible_fitness(fitness: float, hidden: float) -> float:
+    """The fitness over the part of the reference no occluder hides (``hidden`` is the
+    hidden share): an occluder lowers the fitness by the share it hides. At most 1."""
+    return min(1.0, fitness / max(1.0 - hidden, 1e-9))
 
 
 def _record_iterations(record: ServoRecord, result: AlignResult) -> None:

@@ -204,6 +204,13 @@ struct VerificationParams {
   /// neither on the support plane nor on an upward-facing scene surface gives way to the
   /// most confident pose that does, at most 0.1 less confident (docs/alignment.md).
   double reselect_margin = 0.1;
+  /// With global search, in a scene where a support plane is found: objects rest on it or
+  /// on each other, so a pose that does neither (AlignResult::rests false) is not reliable
+  /// (status floating) and, below a reselect_margin of 1, gives way to a resting one. On
+  /// 769 tuning and calibration problems no right answer floated, and 2 of the 3 wrong
+  /// answers taken for reliable did (docs/trust.md, "Floating poses"). False for an object
+  /// that may hang above the table (held in a gripper): its pose is then judged without it.
+  bool expect_resting = true;
 };
 
 /// Settings of `align`, grouped by the stage they steer (docs/architecture.md shows which
@@ -346,6 +353,13 @@ struct AlignResult {
   /// The scene pins the pose down: pose_determined of the covariance at the model's
   /// centroid (false when the verification is off).
   bool determined = false;
+  /// The pose rests on the scene's support plane, or on an upward-facing surface of the
+  /// scene just under its lowest points (within 1.5 voxels). False only where a support
+  /// plane was found (search.global_search and scene.suppress_support_plane on, a plane
+  /// about 4 model reaches across) and the pose neither touches it nor stands on
+  /// anything: a flat object flush with another object's face, the rest of it inside
+  /// that object. With verification.expect_resting such a pose is `floating`.
+  bool rests = true;
   /// The probability that the pose is right (within 5 degrees and 10 mm), in [0, 1]: `score`
   /// through the calibration map fitted on the calibration set (calibrated_confidence).
   double confidence = 0.0;

@@ -19,6 +19,9 @@ enum class Verdict {
   doubtful,      ///< The scene supports the pose too little to be confident.
   undetermined,  ///< The scene supports the pose but leaves a direction free (a plane on a
                  ///< plane): pose_determined fails.
+  floating,      ///< In a scene with a support plane, the pose neither rests on it nor
+                 ///< stands on an upward-facing surface: a flat object flush with another
+                 ///< object's face, the rest of it inside that object (AlignResult::rests).
   no_support,    ///< No point of the answer is supported by the scene (nothing shared).
   max_seconds,   ///< The time budget ran out: the best pose found in time, not judged.
   bad_scale,     ///< The voxel is outside [kMinVoxelShare, kMaxVoxelShare] of the model's
@@ -91,10 +94,12 @@ struct VerdictInputs {
   bool supported = false;   ///< Some point of the answer is supported by the scene.
   bool timed_out = false;   ///< The time budget ran out before the search ended.
   bool scale_ok = true;     ///< voxel_in_range.
+  bool rests = true;        ///< Not floating: AlignResult::rests, or resting not expected.
 };
 
 /// The verdict of an answer: max_seconds, bad_scale, no_support, then doubtful below
-/// kReliableConfidence, undetermined, ambiguous with an alternative, reliable otherwise.
+/// kReliableConfidence, floating, undetermined, ambiguous with an alternative, reliable
+/// otherwise.
 Verdict verdict_of(const VerdictInputs& inputs);
 
 /// The name of a verdict, as Python and the command line print it ("reliable", ...).
