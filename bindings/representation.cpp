@@ -237,6 +237,23 @@ drop_non_finite : bool
         "Replace the points of each voxel_size cube (metres) by their centroid; normals averaged.");
 
   m.def(
+      "prepare_cloud",
+      [](const PointCloud& cloud, double voxel_size, bool downsample,
+         const Eigen::Vector3d& viewpoint, const std::string& argument) {
+        py::gil_scoped_release release;
+        return prepare_cloud(cloud, voxel_size, downsample, viewpoint, argument);
+      },
+      py::arg("cloud"), py::arg("voxel_size"), py::arg("downsample") = true,
+      py::arg("viewpoint") = Eigen::Vector3d::Zero(), py::arg("argument") = "cloud",
+      R"doc(
+The cloud as align(), align_views() and the servo take it: downsampled to half of
+voxel_size (metres; downsample=False keeps every point), with normals where it has none,
+fitted over a radius of twice voxel_size and turned toward viewpoint (the sensor's origin),
+or outward from the centroid when viewpoint lies inside the cloud's bounding box (a model
+centred at the origin). Every error names ``argument`` and the step that failed.
+)doc");
+
+  m.def(
       "estimate_normals",
       [](const PointCloud& cloud, double radius, int k_neighbors, const Eigen::Vector3d& viewpoint,
          const std::string& orientation, int threads) {

@@ -96,6 +96,13 @@ def dominant_plane(
     min_share: float = 0.2,
 ) -> DominantPlane | None: ...
 def voxel_downsample(cloud: PointCloud, voxel_size: float) -> PointCloud: ...
+def prepare_cloud(
+    cloud: PointCloud,
+    voxel_size: float,  # metres: downsampled to half of it, normals over twice it
+    downsample: bool = True,
+    viewpoint: npt.ArrayLike = ...,  # (3,), metres; the origin by default
+    argument: str = "cloud",  # the name every error gives the cloud
+) -> PointCloud: ...
 def estimate_normals(
     cloud: PointCloud,
     radius: float = 0.015,  # metres

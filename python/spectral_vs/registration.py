@@ -16,11 +16,9 @@ from spectral_vs._core import (
     PointCloud,
     _align,
     alignment_voxel_size,
-    estimate_normals,
-    voxel_downsample,
+    prepare_cloud,
 )
 from spectral_vs.clouds import CloudLike, as_cloud
-from spectral_vs.sanity import inside_bounding_box
 
 #: Keywords removed in 0.3 (0.2's deprecated aliases) and what stands for each now.
 _REMOVED_KEYWORDS = {
@@ -83,62 +81,15 @@ def check_viewpoint(viewpoint: Any, argument: str = "viewpoint") -> np.ndarray:
 def prepare(
     cloud: PointCloud, argument: str, voxel_size: float, downsample: bool, viewpoint: Any
 ) -> PointCloud:
-    """Downsample to half a voxel (the EGI and the grid see no finer detail) and add normals.
-
-    Parameters
-    ----------
-    cloud : PointCloud
-        The model or the scene, metres.
-    argument : str
-        Name of the argument, for the error message.
-    voxel_size : float
-        Voxel edge of the alignment, metres: the cloud is downsampled to half of it and
-        missing normals are fitted over a radius of twice it.
-    downsample : bool
-        Downsample first (otherwise only normals are added when missing).
-    viewpoint : array_like, shape (3,)
-        Sensor origin toward which estimated normals point, metres; when it lies inside
-        the cloud's bounding box (a model centred at the origin), they point outward from
-        the cloud's centroid instead.
-
-    Returns
-    -------
-    PointCloud
-        A cloud with normals.
-
-    Raises
-    ------
-    ValueError
-        For an empty cloud, a voxel size that is not finite and positive or too fine for
-        the cloud's extent, or a cloud in which no normal can be fitted (coincident or
-        collinear points).
-    """
-    if len(cloud) == 0:
-        raise ValueError(f"{argument} is empty: at least 1 finite point is needed")
-    check_voxel_size(voxel_size)
-    if downsample:
-        try:
-            cloud = voxel_downsample(cloud, voxel_size / 2)
-        except ValueError as error:  # the core names half the voxel size: say why
-            raise ValueError(
-                f"{argument}: downsampling to half of voxel_size = {voxel_size} m: {error}"
-            ) from error
-    if not cloud.has_normals:
-        # Toward a sensor inside the cloud, a model's normals would point into it: a model
-        # centred at the origin aligned onto single views of itself came back 147 degrees
-        # off at the median (0 of 12 right), 12 of 12 right with outward normals.
-        inside = inside_bounding_box(cloud.points, viewpoint)
-        orientation = "outward" if inside else "toward_viewpoint"
-        try:
-            cloud = estimate_normals(
-                cloud, radius=2 * voxel_size, viewpoint=viewpoint, orientation=orientation
-            )
-        except ValueError as error:  # the core names the radius: say where it comes from
-            raise ValueError(
-                f"{argument}: estimating normals over a radius of 2 x voxel_size = "
-                f"{2 * voxel_size} m: {error}"
-            ) from error
-    return cloud
+    """The one preparation of every registration (:func:`spectral_vs.prepare_cloud`, C++
+    ``prepare_cloud``): downsampled to half of ``voxel_size`` when ``downsample``, normals
+    fitted over twice it where missing, turned toward ``viewpoint`` (outward from a closed
+    model that holds it). Errors name ``argument``; ``ValueError`` for a voxel size that is
+    not a finite number > 0, an empty cloud, or a cloud in which no normal can be fitted."""
+    check_voxel_size(voxel_size)  # a number, before the core reads it as one
+    return prepare_cloud(
+        cloud, float(voxel_size), downsample, check_viewpoint(viewpoint), argument=argument
+    )
 
 
 def derived_voxel_size(settings: AlignParams, model: PointCloud, scene: PointCloud) -> AlignParams:

@@ -396,6 +396,79 @@ TEST(Preprocessing, OutwardNormalsOfASphere) {
   }
 }
 
+// A 0.1 m square of z = 1 m sampled every 5 mm, points at the cells' centres.
+Points square_at_one_metre() {
+  Points p(400, 3);
+  for (int i = 0; i < 20; ++i) {
+    for (int j = 0; j < 20; ++j) p.row(i * 20 + j) << 0.005 * (i + 0.5), 0.005 * (j + 0.5), 1.0;
+  }
+  return p;
+}
+
+TEST(Preparation, DownsamplesToHalfAVoxelAndTurnsNormalsTowardTheSensor) {
+  // At a 20 mm voxel the cubes are 10 mm: 2 x 2 points each, 100 cubes, their centroids
+  // at the cubes' centres; the plane's normals face the sensor at the origin (-z).
+  const PointCloud prepared =
+      prepare_cloud(PointCloud(square_at_one_metre()), 0.02, true, Eigen::Vector3d::Zero());
+  ASSERT_EQ(prepared.size(), 100u);
+  for (Eigen::Index k = 0; k < prepared.points().rows(); ++k) {
+    const Eigen::Vector3d p = prepared.points().row(k).transpose();
+    EXPECT_NEAR(std::fmod(p.x(), 0.01), 0.005, 1e-12);
+    EXPECT_NEAR(std::fmod(p.y(), 0.01), 0.005, 1e-12);
+    EXPECT_NEAR(prepared.normals()(k, 2), -1.0, 1e-9);
+  }
+  // Seen from above the plane instead, and without downsampling: every point, facing +z.
+  const PointCloud all =
+      prepare_cloud(PointCloud(square_at_one_metre()), 0.02, false, Eigen::Vector3d(0, 0, 2));
+  ASSERT_EQ(all.size(), 400u);
+  EXPECT_NEAR(all.normals().col(2).minCoeff(), 1.0, 1e-9);
+}
+
+TEST(Preparation, TurnsNormalsOutwardWhenTheSensorIsInsideTheCloud) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> gaussian;
+  Points p(3000, 3);
+  for (Eigen::Index i = 0; i < p.rows(); ++i) {
+    p.row(i) = Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized() * 0.1;
+  }
+  // A model centred at the origin, "seen" from the origin: toward it would be inward.
+  const PointCloud prepared = prepare_cloud(PointCloud(p), 0.01, false, Eigen::Vector3d::Zero());
+  for (Eigen::Index i = 0; i < prepared.points().rows(); ++i) {
+    ASSERT_GT(prepared.normals().row(i).dot(prepared.points().row(i).normalized()), 0.95) << i;
+  }
+}
+
+TEST(Preparation, KeepsGivenNormalsAndNamesTheArgumentAndTheStep) {
+  const Points p = square_at_one_metre();
+  const Points up = Points::Zero(p.rows(), 3).rowwise() + Eigen::RowVector3d(0, 0, 1);
+  const PointCloud given(p, up);
+  const PointCloud kept = prepare_cloud(given, 0.02, false, Eigen::Vector3d::Zero());
+  EXPECT_EQ(kept.normals(), given.normals());  // not re-fitted toward the sensor
+  const auto message = [](const auto& call) {
+    try {
+      call();
+    } catch (const std::invalid_argument& error) {
+      return std::string(error.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(message([] { prepare_cloud(PointCloud(), 0.02, true, {}, "model"); }),
+            "model is empty: at least 1 finite point is needed");
+  EXPECT_EQ(message([&] { prepare_cloud(given, 0.0, true, {}, "model"); }),
+            "voxel_size must be finite and > 0 metres, got 0");
+  // Points on one line: no plane to fit.
+  Points line(50, 3);
+  for (Eigen::Index i = 0; i < line.rows(); ++i) line.row(i) << 0.001 * double(i), 0.0, 1.0;
+  EXPECT_NE(message([&] {
+              prepare_cloud(PointCloud(line), 0.01, false, {}, "scene");
+            }).find("scene: estimating normals over a radius of 2 x voxel_size = 0.02 m: "),
+            std::string::npos);
+  EXPECT_NE(message([&] {
+              prepare_cloud(given, 1e-300, true, {}, "scene");
+            }).find("scene: downsampling to half of voxel_size = 1e-300 m: "),
+            std::string::npos);
+}
+
 TEST(VoxelGrid, FftFriendlySizes) {
   EXPECT_EQ(fft_friendly_size(1), 2);
   EXPECT_EQ(fft_friendly_size(11), 12);

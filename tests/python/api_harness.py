@@ -1051,6 +1051,24 @@ def _estimate_normals(probe: Probe, data: Any) -> None:
     probe("estimate_normals", svs.estimate_normals, data.draw(cloud_likes()), **kwargs)
 
 
+@entry("prepare_cloud", share=0.5)
+def _prepare_cloud(probe: Probe, data: Any) -> None:
+    kwargs: dict[str, Any] = {}
+    if data.draw(st.booleans()):
+        kwargs["downsample"] = data.draw(st.one_of(st.booleans(), wrong))
+    if data.draw(st.booleans()):
+        kwargs["viewpoint"] = data.draw(vectors)
+    if data.draw(st.booleans()):
+        kwargs["argument"] = data.draw(st.one_of(st.sampled_from(["model", "scene"]), wrong))
+    probe(
+        "prepare_cloud",
+        svs.prepare_cloud,
+        data.draw(cloud_likes()),
+        data.draw(sometimes_wrong(reals(0.0, 1e-3, 1e6))),
+        **kwargs,
+    )
+
+
 @entry("GridSpec")
 def _grid_spec(probe: Probe, data: Any) -> None:
     dims = data.draw(

@@ -293,3 +293,27 @@ def test_dominant_plane_finds_a_table_under_clutter():
     assert svs.dominant_plane(cloud, offset_bin=0.001, band=0.002, min_share=0.9) is None
     with pytest.raises(ValueError, match="offset_bin must be finite and > 0 m"):
         svs.dominant_plane(cloud, offset_bin=0.0)
+
+
+def test_prepare_cloud_is_the_registrations_preparation():
+    # A 0.1 m square at z = 1 m every 5 mm: at a 20 mm voxel, 10 mm cubes of 2 x 2 points.
+    grid = (np.arange(20) + 0.5) * 0.005
+    x, y = np.meshgrid(grid, grid)
+    square = svs.PointCloud(np.c_[x.ravel(), y.ravel(), np.ones(400)])
+    prepared = svs.prepare_cloud(square, 0.02, viewpoint=(0.0, 0.0, 0.0))
+    assert len(prepared) == 100
+    np.testing.assert_allclose(
+        np.sort(np.unique(prepared.points[:, 0])), (np.arange(10) + 0.5) * 0.01
+    )
+    np.testing.assert_allclose(prepared.normals[:, 2], -1.0, atol=1e-9)  # toward the sensor
+    # align()'s own preparation is the same call: its model, downsampled, is this cloud.
+    from spectral_vs.registration import prepare
+
+    again = prepare(square, "model", 0.02, True, (0.0, 0.0, 0.0))
+    assert np.array_equal(again.points, prepared.points)
+    assert np.array_equal(again.normals, prepared.normals)
+    with pytest.raises(ValueError, match=r"^model is empty"):
+        svs.prepare_cloud(svs.PointCloud(np.zeros((0, 3))), 0.02, argument="model")
+    line = svs.PointCloud(np.c_[np.arange(50) * 0.001, np.zeros(50), np.ones(50)])
+    with pytest.raises(ValueError, match=r"^scene: estimating normals over a radius of 2 x"):
+        svs.prepare_cloud(line, 0.01, downsample=False, argument="scene")

@@ -139,7 +139,8 @@ PointCloud structure(const PointCloud& view, const PlaneBalance& balance) {
 }
 
 PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, double voxel_size) {
-  return params.downsample ? voxel_downsample(view, 0.5 * voxel_size) : view;
+  // Both views arrive with normals (check_views): the one preparation only downsamples.
+  return prepare_cloud(view, voxel_size, params.downsample, params.sensor_origin, "view");
 }
 
 namespace {

@@ -56,7 +56,8 @@ PointCloud balanced(const PointCloud& view, const PlaneBalance& balance);
 PointCloud cropped(const PointCloud& view);
 /// The view's points off its dominant plane (all of it without one).
 PointCloud structure(const PointCloud& view, const PlaneBalance& balance);
-/// The view as the stages take it: downsampled to half a voxel unless told not to.
+/// The view as the stages take it: prepare_cloud's, downsampled to half a voxel unless told
+/// not to.
 PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, double voxel_size);
 
 // Stage: verification. The reference at a pose against the current view's depth image.

@@ -9,6 +9,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -151,6 +153,49 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
     ++row;
   }
   return PointCloud(std::move(points), std::move(normals));
+}
+
+namespace {
+
+// Whether `point` lies strictly inside the axis-aligned box of the cloud's points.
+bool inside_box(const PointCloud& cloud, const Eigen::Vector3d& point) {
+  const Points& p = cloud.points();
+  return (p.colwise().minCoeff().transpose().array() < point.array()).all() &&
+         (point.array() < p.colwise().maxCoeff().transpose().array()).all();
+}
+
+// A step's error, said with the argument and the step it came from.
+template <typename Step>
+PointCloud step_of(Step step, const std::string& argument, const std::string& what) {
+  try {
+    return step();
+  } catch (const std::invalid_argument& error) {
+    throw std::invalid_argument(argument + ": " + what + ": " + error.what());
+  }
+}
+
+}  // namespace
+
+PointCloud prepare_cloud(const PointCloud& cloud, double voxel_size, bool downsample,
+                         const Eigen::Vector3d& viewpoint, const std::string& argument) {
+  if (cloud.size() == 0) fail(argument, " is empty: at least 1 finite point is needed");
+  if (!(std::isfinite(voxel_size) && voxel_size > 0.0))
+    fail("voxel_size must be finite and > 0 metres, got ", voxel_size);
+  if (!viewpoint.allFinite()) fail(argument, ": the viewpoint must be finite");
+  std::ostringstream half, radius;
+  half << "downsampling to half of voxel_size = " << voxel_size << " m";
+  radius << "estimating normals over a radius of 2 x voxel_size = " << 2.0 * voxel_size << " m";
+  PointCloud prepared =
+      downsample
+          ? step_of([&] { return voxel_downsample(cloud, 0.5 * voxel_size); }, argument, half.str())
+          : cloud;
+  if (prepared.has_normals()) return prepared;
+  NormalEstimationParams normals;
+  normals.radius = 2.0 * voxel_size;
+  normals.viewpoint = viewpoint;
+  normals.orientation = inside_box(prepared, viewpoint) ? NormalOrientation::outward
+                                                        : NormalOrientation::toward_viewpoint;
+  return step_of([&] { return estimate_normals(prepared, normals); }, argument, radius.str());
 }
 
 }  // namespace spectral_vs

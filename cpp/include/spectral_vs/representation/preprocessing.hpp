@@ -5,6 +5,8 @@
 
 #include <spectral_vs/representation/point_cloud.hpp>
 
+#include <string>
+
 namespace spectral_vs {
 
 /// Replaces the points of each `voxel_size` cube by their centroid. The cubes are those
@@ -50,5 +52,21 @@ struct NormalEstimationParams {
 ///         radius, k outside [0, 1024], threads outside [1, 256], or when no point gets a normal
 ///         (the message counts the points too far to be searched).
 PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParams& params = {});
+
+/// A cloud as the registrations take it, the one preparation of align(), align_views() and
+/// the servo: downsampled to half of `voxel_size` (the EGI and the grids see no finer
+/// detail; `downsample` false keeps every point), with normals where it has none, fitted
+/// over a radius of twice `voxel_size` and turned toward `viewpoint` (the sensor's origin),
+/// or outward from the cloud's centroid when `viewpoint` lies strictly inside the cloud's
+/// bounding box: toward a point inside a closed model (one centred at the origin) they
+/// would point into it (a model aligned onto single views of itself so came back 147
+/// degrees off at the median, 0 of 12 right; 12 of 12 right outward).
+/// @param argument the cloud's name in the caller's API, which every message names.
+/// @throws std::invalid_argument for an empty cloud, a voxel_size that is not finite and
+///         > 0, a non-finite viewpoint, and as voxel_downsample and estimate_normals (a
+///         voxel too fine for the cloud's extent, a cloud in which no normal can be fitted),
+///         saying which step of the preparation failed.
+PointCloud prepare_cloud(const PointCloud& cloud, double voxel_size, bool downsample,
+                         const Eigen::Vector3d& viewpoint, const std::string& argument = "cloud");
 
 }  // namespace spectral_vs
