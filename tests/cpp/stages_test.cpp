@@ -130,6 +130,17 @@ TEST(Hypotheses, PlacedRotationsRefineEachCandidatePlaceItAndScoreItInTheSearchO
   EXPECT_EQ(scored, (std::vector<int>{0}));
 }
 
+TEST(Refinement, BothModesKeepAlgorithmOnesEndAndTheICPByOneRuleEach) {
+  // Algorithm 1's end stands unless its start scores strictly higher (ties: the end).
+  EXPECT_TRUE(keeps_algorithm1(0.80, 0.80));
+  EXPECT_TRUE(keeps_algorithm1(0.81, 0.80));
+  EXPECT_FALSE(keeps_algorithm1(0.79, 0.80));
+  // The ICP's pose stands unless it scores more than kIcpScoreLoss lower.
+  EXPECT_TRUE(keeps_icp(0.80 - kIcpScoreLoss, 0.80));
+  EXPECT_FALSE(keeps_icp(0.80 - kIcpScoreLoss - 1e-9, 0.80));
+  EXPECT_TRUE(keeps_icp(0.90, 0.80));
+}
+
 TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
   const MovedObject object(3);
   Stages stages(object);

@@ -67,4 +67,14 @@ double capped_step(double step, const LocalParams& params, bool* capped);
 AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
                            int max_iterations, Algorithm1Timings* timings = nullptr);
 
+/// The one rule of both modes' refinement from a hypothesis: where Algorithm 1 ended,
+/// scored `end_score`, replaces its start, scored `start_score`, unless the start scores
+/// strictly higher. Algorithm 1 can walk off a right start: in clutter the window's EGI
+/// holds other objects' normals, and the EGI correlation of two partial views peaks 10-20
+/// degrees off the truth. The score is the caller's (align: the screen's fitness;
+/// align_views: the support's score).
+inline bool keeps_algorithm1(double end_score, double start_score) {
+  return !(start_score > end_score);
+}
+
 }  // namespace spectral_vs::detail

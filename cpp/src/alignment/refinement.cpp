@@ -194,7 +194,7 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
   // walk off a right hypothesis: the fitter of the two poses is kept.
   const double start_fitness =
       problem.model.fitness(problem.verifier, hypothesis.pose, problem.params.scene.voxel_size);
-  if (start_fitness > result.fitness) {
+  if (!keeps_algorithm1(result.fitness, start_fitness)) {
     // The returned pose is then not where this run ended: it claims no iterations.
     result.T_scene_model = problem.model.transform_of(hypothesis.pose);
     result.fitness = start_fitness;

@@ -59,7 +59,7 @@ ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
   detail::run_algorithm1(loop, pose, grid, views.params.refinement_iterations);
   const Transform refined = views.model.transform_of(pose);
   const ViewSupport refined_support = views.support.of(refined, kCoarseTolerance);
-  if (refined_support.score >= result.support.score) {
+  if (keeps_algorithm1(refined_support.score, result.support.score)) {
     result.T_current_reference = refined;
     result.support = refined_support;
   }
