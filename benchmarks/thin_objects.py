@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections import Counter
 from pathlib import Path
 
 import cases as case_lib
@@ -45,6 +46,8 @@ def run_case(spec: case_lib.CaseSpec) -> dict:
         "rotation_error_deg": rotation_deg,
         "translation_error_mm": 1000.0 * translation_m,
         "confidence": result.score,  # the uncalibrated score, the confidence of before the verdict
+        "reliable": bool(result.reliable),
+        "status": result.status,
         "cpu_s": seconds,
     }
 
@@ -75,11 +78,34 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def verdict_table(rows: list[dict]) -> str:
+    """Per object, the verdict of its answers: right ones taken as reliable, and wrong ones
+    taken as reliable (a confident wrong answer, which the verdict must never give)."""
+    lines = [
+        "| object | right | of them reliable | wrong | of them reliable "
+        "| the wrong ones' statuses |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in dict.fromkeys(r["object"] for r in rows):
+        mine = [r for r in rows if r["object"] == name]
+        right = [r for r in mine if r["success"]]
+        wrong = [r for r in mine if not r["success"]]
+        statuses = Counter(r.get("status", "-") for r in wrong)
+        lines.append(
+            f"| {name} | {len(right)} | {sum(r['reliable'] for r in right)} | {len(wrong)} | "
+            f"{sum(r['reliable'] for r in wrong)} | "
+            + (", ".join(f"{s} {n}" for s, n in sorted(statuses.items())) or "-")
+            + " |"
+        )
+    return "\n".join(lines)
+
+
 def report(results: dict) -> None:
     block = (
         f"Commit `{results['commit']}`, {results['machine']}; `OMP_NUM_THREADS=1 nice -n 10 "
         f"python benchmarks/thin_objects.py` (each thin object among 3-5 tuning objects, "
-        f"defaults, one thread; right of the scenes).\n\n{table(results['records'])}"
+        f"defaults, one thread; right of the scenes).\n\n{table(results['records'])}\n\n"
+        f"The verdict of the same answers (docs/trust.md):\n\n{verdict_table(results['records'])}"
     )
     replace_block(EXPERIMENTS_DOC, "thin-objects", block)
 
