@@ -39,30 +39,30 @@ double capped_step(double step, const LocalParams& params, bool* capped) {
 
 AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
                            int max_iterations, Algorithm1Timings* timings) {
-  const AlignParams& params = problem.params;
-  const bool newton = params.local.rotation_step == RotationStep::newton;
+  const LocalParams& local = problem.local;
+  const bool newton = local.rotation_step == RotationStep::newton;
   AlignResult result;
   for (int iteration = 0; iteration < max_iterations; ++iteration) {
     const auto start = Clock::now();
     const CorrelationValue c = problem.correlation.evaluate(pose.R, newton);
-    pose.R = pose.R * exp_so3(rotation_step(c, params.local));
+    pose.R = pose.R * exp_so3(rotation_step(c, local));
     const auto rotated = Clock::now();
 
     const TranslationEstimate shift = source.estimate(problem.model.move(pose));
-    const Eigen::Vector3d step = params.local.translation_gain * shift.shift;
+    const Eigen::Vector3d step = local.translation_gain * shift.shift;
     pose.offset += step;
     const auto translated = Clock::now();
 
     AlignIteration record;
     record.seconds = seconds_between(start, translated);
-    record.translation_step = step.norm() / params.scene.voxel_size;
+    record.translation_step = step.norm() / problem.voxel_size;
     record.rotation_gradient = c.gradient.norm();
     record.correlation = c.value;
     record.translation_peak = shift.peak;
     if (problem.costs) {
       record.translation_cost = source.translation_cost();
       record.rotation_cost = rotation_cost(problem.scene_coefficients, problem.model_coefficients,
-                                           pose.R, params.scene.bandwidth, true);
+                                           pose.R, problem.bandwidth, true);
     }
     record.T_scene_model = problem.model.transform_of(pose);
     result.history.push_back(record);
@@ -72,7 +72,7 @@ AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, Transla
       timings->translation += seconds_between(rotated, translated);
       timings->records += seconds_between(translated, Clock::now());
     }
-    if (record.translation_step + record.rotation_gradient < params.local.tolerance) {
+    if (record.translation_step + record.rotation_gradient < local.tolerance) {
       result.converged = true;
       result.stop_reason = AlignStopReason::converged;
       break;

@@ -47,7 +47,9 @@ struct Algorithm1Problem {
   const ShCoefficients& scene_coefficients;
   const ShCoefficients& model_coefficients;
   MovingModel& model;
-  const AlignParams& params;  // local (gains, step law, tolerance), scene (voxel, bandwidth)
+  const LocalParams& local;  // the gains, the step law, the tolerance
+  double voxel_size;         // metres: the unit of the translation step's record
+  int bandwidth;             // of the EGIs, for J_r
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
   bool costs = true;  ///< J_t and J_r in the history's records; false: left 0 (not read)
 };

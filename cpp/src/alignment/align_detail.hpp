@@ -14,8 +14,8 @@ namespace spectral_vs::detail {
 /// The argument checks of align(). @throws std::invalid_argument as align() does.
 void check_align_params(const AlignParams& params);
 
-/// The time limit of params.max_seconds from `start` (none for 0).
-std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
+/// The time limit of `max_seconds` from `start` (none for 0).
+std::chrono::steady_clock::time_point deadline_of(double max_seconds,
                                                   std::chrono::steady_clock::time_point start);
 
 /// The sensor origin of a scene declared a single view (scene_view = single_view); none
@@ -27,7 +27,11 @@ inline double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-/// The phase-correlation settings of the alignment's grids (sub-voxel, threads, limits).
-PhaseCorrelationParams phase_params(const AlignParams& params);
+/// The phase-correlation settings of the alignment's grids: local.subvoxel, threads, limits.
+PhaseCorrelationParams phase_params(const LocalParams& local, int threads,
+                                    const GridLimits& limits);
+inline PhaseCorrelationParams phase_params(const AlignParams& params) {
+  return phase_params(params.local, params.threads, params.limits);
+}
 
 }  // namespace spectral_vs::detail

@@ -100,19 +100,20 @@ double window_margin(double search_voxel, const AlignParams& params) {
   return std::max(5.0 * params.scene.voxel_size, 2.5 * search_voxel);
 }
 
-std::chrono::steady_clock::time_point deadline_of(const AlignParams& params,
+std::chrono::steady_clock::time_point deadline_of(double max_seconds,
                                                   std::chrono::steady_clock::time_point start) {
   using Clock = std::chrono::steady_clock;
-  if (params.max_seconds == 0.0) return Clock::time_point::max();
-  const std::chrono::duration<double> budget(std::min(params.max_seconds, 1e9));  // no overflow
+  if (max_seconds == 0.0) return Clock::time_point::max();
+  const std::chrono::duration<double> budget(std::min(max_seconds, 1e9));  // no overflow
   return start + std::chrono::duration_cast<Clock::duration>(budget);
 }
 
-PhaseCorrelationParams phase_params(const AlignParams& params) {
+PhaseCorrelationParams phase_params(const LocalParams& local, int threads,
+                                    const GridLimits& limits) {
   PhaseCorrelationParams p;
-  p.subvoxel = params.local.subvoxel;
-  p.threads = params.threads;
-  p.limits = params.limits;
+  p.subvoxel = local.subvoxel;
+  p.threads = threads;
+  p.limits = limits;
   return p;
 }
 

@@ -230,7 +230,7 @@ AlignResult align(const PointCloud& model, const PointCloud& scene, const AlignP
   require_normals(model, "model");
   require_normals(scene, "scene");
   check_align_params(given);
-  const Clock::time_point deadline = deadline_of(given, Clock::now());
+  const Clock::time_point deadline = deadline_of(given.max_seconds, Clock::now());
   AlignParams params = given;
   if (params.scene.voxel_size == 0.0) params.scene.voxel_size = alignment_voxel_size(model, scene);
   ScoredModel moving(model);

@@ -151,8 +151,10 @@ struct ModelAligner::Impl {
                                          scene_coefficients,
                                          model_coefficients,
                                          *moving_model,
-                                         params,
-                                         detail::deadline_of(params, started)};
+                                         params.local,
+                                         params.scene.voxel_size,
+                                         params.scene.bandwidth,
+                                         detail::deadline_of(params.max_seconds, started)};
     detail::Algorithm1Timings loop_timings;
     AlignResult result =
         detail::run_algorithm1(loop, pose, grid, params.local.max_iterations, &loop_timings);

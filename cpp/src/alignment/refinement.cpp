@@ -161,8 +161,14 @@ TranslationWindow& WindowCache::at(const Problem& problem, const Eigen::Vector3d
 AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& correlation,
                                     const ShCoefficients& scene_coefficients, Pose pose,
                                     TranslationSource& source, int max_iterations) {
-  const Algorithm1Problem loop{correlation,   scene_coefficients, problem.model_coefficients,
-                               problem.model, problem.params,     problem.deadline};
+  const Algorithm1Problem loop{correlation,
+                               scene_coefficients,
+                               problem.model_coefficients,
+                               problem.model,
+                               problem.params.local,
+                               problem.params.scene.voxel_size,
+                               problem.params.scene.bandwidth,
+                               problem.deadline};
   AlignResult result = run_algorithm1(loop, pose, source, max_iterations);
   result.fitness = problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
   return result;

@@ -69,8 +69,8 @@ void add_window_hypotheses(const Views& views, const PointCloud& window, double 
   // Each rotation's grid is around the model as it starts, turned: its own placement.
   const auto place = [&](const Points& at_start) {
     SceneTranslation placement(views.map, points_box(at_start), kWindowRoom * side,
-                               views.scale.search_voxel_size, views.params.occupancy,
-                               detail::phase_params(views.loop), views.params.limits);
+                               views.scale.search_voxel_size, views.params.occupancy, views.phase,
+                               views.params.limits);
     return placement.estimate(at_start).shift;
   };
   const int first = first_index + int(out.size());
@@ -185,8 +185,7 @@ std::vector<Hypothesis> hypotheses(const Views& views) {
   centred.offset = start - views.model.centroid();
   SceneTranslation placement(views.map, points_box(views.model.move(centred)),
                              kPlacementRoom * views.scale.extent, views.scale.search_voxel_size,
-                             views.params.occupancy, detail::phase_params(views.loop),
-                             views.params.limits);
+                             views.params.occupancy, views.phase, views.params.limits);
   RotationRefineParams refine;
   refine.max_iterations = kRotationRefineIterations;
   std::vector<Hypothesis> out = placed_rotations(

@@ -145,19 +145,6 @@ PointCloud prepared(const PointCloud& view, const ViewAlignParams& params, doubl
 
 namespace {
 
-// The settings of align()'s Algorithm 1 and phase correlation at the views' scale.
-AlignParams loop_params(const ViewAlignParams& p, const ViewScale& scale) {
-  AlignParams a;
-  a.scene.voxel_size = scale.voxel_size;
-  a.scene.bandwidth = p.bandwidth;
-  a.threads = p.threads;
-  a.scene.occupancy = p.occupancy;
-  a.scene.egi_method = p.egi_method;
-  a.limits = p.limits;
-  a.max_seconds = p.max_seconds;
-  return a;
-}
-
 // The box of the current view grown by two search voxels: the ICP's grids' extent.
 Eigen::AlignedBox3d icp_box(const PointCloud& current, const ViewScale& scale) {
   Eigen::AlignedBox3d around = bounding_box(current);
@@ -173,7 +160,7 @@ PreparedViews::PreparedViews(const PointCloud& reference_view, const PointCloud&
                              Clock::time_point started)
     : params_(params),
       scale_(scale),
-      loop_(loop_params(params, scale)),
+      phase_(detail::phase_params(local_, params.threads, params.limits)),
       reference_(prepared(reference_view, params, scale.voxel_size)),
       current_(prepared(current_view, params, scale.voxel_size)),
       reference_balance_(plane_balance(reference_.normals())),
@@ -192,13 +179,14 @@ PreparedViews::PreparedViews(const PointCloud& reference_view, const PointCloud&
       current_coarse_(voxel_downsample(current_, scale.voxel_size)),
       coarse_scene_(current_coarse_, around_, scale.search_voxel_size),
       fine_scene_(current_, around_, scale.voxel_size),
-      deadline_(detail::deadline_of(loop_, started)) {}
+      deadline_(detail::deadline_of(params.max_seconds, started)) {}
 
 Views PreparedViews::views() {
   return Views{reference_,
                current_,
                params_,
-               loop_,
+               local_,
+               phase_,
                scale_,
                model_,
                reference_balanced_,

@@ -47,13 +47,15 @@ ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
   // (and its grid, spanning both, could be of any size).
   if (!box.intersects(bounding_box(views.map.cloud()))) return result;
   SceneTranslation grid(views.map, box, kRefinementRoom * views.scale.search_voxel_size,
-                        views.scale.voxel_size, views.params.occupancy,
-                        detail::phase_params(views.loop), views.params.limits);
+                        views.scale.voxel_size, views.params.occupancy, views.phase,
+                        views.params.limits);
   const detail::Algorithm1Problem loop{views.correlation,
                                        views.current_coefficients,
                                        views.reference_coefficients,
                                        views.model,
-                                       views.loop,
+                                       views.local,
+                                       views.scale.voxel_size,
+                                       views.params.bandwidth,
                                        views.deadline,
                                        false};  // its history is not read
   detail::run_algorithm1(loop, pose, grid, views.params.refinement_iterations);

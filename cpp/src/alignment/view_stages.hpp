@@ -107,7 +107,8 @@ struct Views {
   const PointCloud& reference;
   const PointCloud& current;
   const ViewAlignParams& params;
-  const AlignParams& loop;  // Algorithm 1's settings at the views' scale
+  const LocalParams& local;             // Algorithm 1's settings: align()'s defaults
+  const PhaseCorrelationParams& phase;  // the translation grids': threads, limits
   const ViewScale& scale;
   detail::MovingModel& model;     // the reference, moved about its centroid
   const PointCloud& model_cloud;  // what it moves: the reference balanced
@@ -138,7 +139,8 @@ class PreparedViews {
  private:
   const ViewAlignParams& params_;
   const ViewScale scale_;
-  const AlignParams loop_;
+  const LocalParams local_{};
+  const PhaseCorrelationParams phase_;
   const PointCloud reference_, current_;
   const PlaneBalance reference_balance_;
   const PointCloud reference_balanced_, current_balanced_;
