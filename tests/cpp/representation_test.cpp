@@ -377,13 +377,20 @@ TEST(Preprocessing, NormalsOfAPlaneFaceTheViewpoint) {
   EXPECT_LT((with_normals.normals().col(2).array() + 1.0).abs().maxCoeff(), 1e-6);
 }
 
-TEST(Preprocessing, OutwardNormalsOfASphere) {
-  std::mt19937 rng(6);
+// `n` points uniform on the sphere of `radius` metres about the origin.
+Points sphere_points(Eigen::Index n, double radius, unsigned seed) {
+  std::mt19937 rng(seed);
   std::normal_distribution<double> gaussian;
-  Points p(3000, 3);
-  for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    p.row(i) = Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized() * 0.1;
+  Points p(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    p.row(i) =
+        Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized() * radius;
   }
+  return p;
+}
+
+TEST(Preprocessing, OutwardNormalsOfASphere) {
+  const Points p = sphere_points(3000, 0.1, 6);
   NormalEstimationParams params;
   params.k_neighbors = 15;
   params.orientation = NormalOrientation::outward;
@@ -425,12 +432,7 @@ TEST(Preparation, DownsamplesToHalfAVoxelAndTurnsNormalsTowardTheSensor) {
 }
 
 TEST(Preparation, TurnsNormalsOutwardWhenTheSensorIsInsideTheCloud) {
-  std::mt19937 rng(7);
-  std::normal_distribution<double> gaussian;
-  Points p(3000, 3);
-  for (Eigen::Index i = 0; i < p.rows(); ++i) {
-    p.row(i) = Eigen::RowVector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized() * 0.1;
-  }
+  const Points p = sphere_points(3000, 0.1, 7);
   // A model centred at the origin, "seen" from the origin: toward it would be inward.
   const PointCloud prepared = prepare_cloud(PointCloud(p), 0.01, false, Eigen::Vector3d::Zero());
   for (Eigen::Index i = 0; i < prepared.points().rows(); ++i) {
