@@ -274,7 +274,7 @@ def test_a_floating_pose_exits_1_unless_the_object_may_float(capsys, tmp_path):
     assert "floating" in out and "neither rests on the table" in out
     code, out, _ = run(capsys, *argv, "--may-float", "--json")
     report = json.loads(out)
-    assert code == 0 and report["status"] == "reliable"
+    assert code == 0 and report["status"] == "reliable" and report["rests"] is False
     rotation_deg, error_mm = errors(np.array(report["T_scene_model"]), T, model.points.mean(axis=0))
     assert rotation_deg < 1.0 and error_mm < 1.0
 

@@ -54,7 +54,9 @@ hypotheses are checked against what the sensor saw (--scene-view).
 Every answer carries its verdict (docs/trust.md): "reliable" (its calibrated confidence
 is at least svs.RELIABLE_CONFIDENCE and no other pose fits as well), "ambiguous" (other
 poses, listed as alternatives, fit about as well: a symmetric object), "doubtful",
-"no_support", "max_seconds" or "bad_scale" (a voxel out of range of the model's size).
+"floating" (in a view of a table, the pose neither rests on it nor stands on anything;
+--may-float for an object held above it), "undetermined", "no_support", "max_seconds" or
+"bad_scale" (a voxel out of range of the model's size).
 
 Exit code: 0 when the answer is reliable (and within the error limits when a ground truth
 is given), 1 when it is not (the reason is printed), 2 on bad input."""

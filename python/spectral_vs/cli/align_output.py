@@ -40,6 +40,7 @@ def json_report(
         "hypothesis": int(result.hypothesis),
         "reliable": bool(result.reliable),
         "status": result.status,
+        "rests": bool(result.rests),
         "confidence": float(result.confidence),
         "score": float(result.score),
         **covariance_report(result.covariance),
