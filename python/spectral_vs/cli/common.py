@@ -34,8 +34,8 @@ VERDICT_REASONS = {
     "what tells them apart)",
     "doubtful": "the scene supports the pose too little",
     "floating": "the pose neither rests on the table nor stands on anything (an object "
-    "flush with another's face, the rest of it inside that object); pass "
-    "expect_resting=False for an object held above the table",
+    "flush with another's face, the rest of it inside that object); for an object held "
+    "above the table, --may-float (expect_resting=False)",
     "undetermined": "the scene leaves a direction of the pose free (a plane on a plane): "
     "its covariance is wider than 5 degrees or 10 mm",
     "no_support": "the scene supports no part of the answer (nothing shared)",
