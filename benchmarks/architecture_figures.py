@@ -33,7 +33,9 @@ FIGURES = ROOT / "docs" / "figures"
 #: The groups a stage declares; `scene` (the unit every stage measures in) and the
 #: top-level fields (threads, limits, max_seconds, initial_guess) every stage may read.
 STAGE_GROUPS = ("search", "refinement", "local", "verification")
-GROUP_READ = re.compile(r"params(?:\(\))?\.(" + "|".join(STAGE_GROUPS) + r")\.(\w+)")
+#: A read: ``params.<group>.<field>`` (``params()``: ModelAligner's), or of a group a stage
+#: was handed, ``problem.<group>.<field>`` (Algorithm 1's ``problem.local``).
+GROUP_READ = re.compile(r"(?:params(?:\(\))?|problem)\.(" + "|".join(STAGE_GROUPS) + r")\.(\w+)")
 
 #: align()'s stages in the order it runs them, and their files.
 ALIGN_STAGES = (

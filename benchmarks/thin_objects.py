@@ -42,7 +42,7 @@ def run_case(spec: case_lib.CaseSpec) -> dict:
         "case": spec.case_id,
         "object": spec.object,
         "angle_deg": spec.angle_deg,
-        "success": bool(rotation_deg < 5.0 and translation_m < 0.010),
+        "success": case_lib.succeeded(rotation_deg, translation_m),
         "rotation_error_deg": rotation_deg,
         "translation_error_mm": 1000.0 * translation_m,
         "confidence": result.score,  # the uncalibrated score, the confidence of before the verdict

@@ -301,8 +301,7 @@ def test_a_wrong_pose_that_floats_is_not_reliable():
 
 def errors(model: svs.PointCloud, T_true: np.ndarray, T: np.ndarray) -> tuple[float, float]:
     """Degrees, metres (at the model's centroid)."""
-    D = np.linalg.inv(T_true) @ T
-    degrees = math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
+    degrees = cases.rotation_angle_deg(T_true[:3, :3].T @ T[:3, :3])
     centre = np.append(model.points.mean(axis=0), 1.0)
     return degrees, float(np.linalg.norm((T @ centre - T_true @ centre)[:3]))
 

@@ -323,9 +323,12 @@ def test_every_stage_reads_only_the_settings_its_row_declares():
 
 
 def test_the_stage_reads_parser_sees_a_read_and_a_declaration():
-    assert GROUP_READ.findall("problem.params.search.max_parts + params().local.icp") == [
+    assert GROUP_READ.findall(
+        "problem.params.search.max_parts + params().local.icp + problem.local.tolerance"
+    ) == [
         ("search", "max_parts"),
         ("local", "icp"),
+        ("local", "tolerance"),
     ]
     groups, fields = declared_reads(
         "`search` (hypotheses); `local.rotation_step`, the switches: `refinement` (polish, icp)"

@@ -39,17 +39,16 @@ double capped_step(double step, const LocalParams& params, bool* capped) {
 
 AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, TranslationSource& source,
                            int max_iterations, Algorithm1Timings* timings) {
-  const LocalParams& local = problem.local;
-  const bool newton = local.rotation_step == RotationStep::newton;
+  const bool newton = problem.local.rotation_step == RotationStep::newton;
   AlignResult result;
   for (int iteration = 0; iteration < max_iterations; ++iteration) {
     const auto start = Clock::now();
     const CorrelationValue c = problem.correlation.evaluate(pose.R, newton);
-    pose.R = pose.R * exp_so3(rotation_step(c, local));
+    pose.R = pose.R * exp_so3(rotation_step(c, problem.local));
     const auto rotated = Clock::now();
 
     const TranslationEstimate shift = source.estimate(problem.model.move(pose));
-    const Eigen::Vector3d step = local.translation_gain * shift.shift;
+    const Eigen::Vector3d step = problem.local.translation_gain * shift.shift;
     pose.offset += step;
     const auto translated = Clock::now();
 
@@ -72,7 +71,7 @@ AlignResult run_algorithm1(const Algorithm1Problem& problem, Pose& pose, Transla
       timings->translation += seconds_between(rotated, translated);
       timings->records += seconds_between(translated, Clock::now());
     }
-    if (record.translation_step + record.rotation_gradient < local.tolerance) {
+    if (record.translation_step + record.rotation_gradient < problem.local.tolerance) {
       result.converged = true;
       result.stop_reason = AlignStopReason::converged;
       break;

@@ -196,6 +196,9 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
   best.search_voxel_size = search_voxel;
   const Verifier& verifier = prepared.verifier;
   set_verification(best, verifier.verify(model, best.T_scene_model));
+  // Made once: the resting rule and the verdict's `rests` ask it, of the same scene cells.
+  std::optional<RestingCheck> resting;
+  if (prepared.plane) resting.emplace(prepared.searched, *prepared.plane, params.scene.voxel_size);
   if (best.stop_reason != AlignStopReason::max_seconds &&
       params.verification.max_alternatives > 0) {
     AlternativeSources sources{
@@ -212,13 +215,11 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
     if (reselect(problem, prepared, model, coverage, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
-    if (prepared.plane && params.verification.expect_resting &&
-        rest_on_support(problem, prepared, model, verifier, best))
+    if (resting && params.verification.expect_resting &&
+        rest_on_support(problem, prepared, model, verifier, *resting, best))
       find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
   }
-  if (prepared.plane)
-    best.rests = RestingCheck(prepared.searched, *prepared.plane, params.scene.voxel_size)
-                     .rests(model, best.T_scene_model);
+  if (resting) best.rests = resting->rests(model, best.T_scene_model);
   return best;
 }
 

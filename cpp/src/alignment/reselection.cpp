@@ -135,11 +135,10 @@ std::optional<AlignAlternative> most_confident_resting(const PointCloud& model,
 
 // Whether a resting pose replaced one that does not rest (kRestingMargin).
 bool rest_on_support(const Problem& problem, Prepared& prepared, const PointCloud& model,
-                     const Verifier& verifier, AlignResult& best) {
+                     const Verifier& verifier, const RestingCheck& check, AlignResult& best) {
   // Past max_seconds the returned pose stands: the search is not reopened.
   if (problem.params.verification.reselect_margin >= 1.0 || expired(problem)) return false;
   const double voxel = problem.params.scene.voxel_size;
-  const RestingCheck check(prepared.searched, *prepared.plane, voxel);
   if (check.rests(model, best.T_scene_model)) return false;
   std::vector<Transform> candidates;
   for (const AlignAlternative& alternative : best.alternatives)

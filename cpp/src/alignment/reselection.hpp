@@ -7,6 +7,7 @@
 
 #include "alignment/part_coverage.hpp"
 #include "alignment/prepared.hpp"
+#include "alignment/resting.hpp"
 #include "alignment/stages.hpp"
 
 #include <optional>
@@ -17,8 +18,9 @@ namespace spectral_vs::detail {
 bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
               const std::optional<PartCoverage>& coverage, AlignResult& best);
 
-/// Whether a resting pose replaced `best`, one that does not rest (kRestingMargin).
+/// Whether a resting pose replaced `best`, one that does not rest by `check` (made on
+/// prepared's support plane; kRestingMargin).
 bool rest_on_support(const Problem& problem, Prepared& prepared, const PointCloud& model,
-                     const Verifier& verifier, AlignResult& best);
+                     const Verifier& verifier, const RestingCheck& check, AlignResult& best);
 
 }  // namespace spectral_vs::detail

@@ -1,4 +1,5 @@
 #include <spectral_vs/representation/preprocessing.hpp>
+#include <spectral_vs/representation/voxel_grid.hpp>
 
 #include "common/checks.hpp"
 
@@ -157,20 +158,22 @@ PointCloud estimate_normals(const PointCloud& cloud, const NormalEstimationParam
 
 namespace {
 
-// Whether `point` lies strictly inside the axis-aligned box of the cloud's points.
+// Whether `point` lies strictly inside the cloud's bounding box.
 bool inside_box(const PointCloud& cloud, const Eigen::Vector3d& point) {
-  const Points& p = cloud.points();
-  return (p.colwise().minCoeff().transpose().array() < point.array()).all() &&
-         (point.array() < p.colwise().maxCoeff().transpose().array()).all();
+  const Eigen::AlignedBox3d box = bounding_box(cloud);
+  return (box.min().array() < point.array()).all() && (point.array() < box.max().array()).all();
 }
 
-// A step's error, said with the argument and the step it came from.
-template <typename Step>
-PointCloud step_of(Step step, const std::string& argument, const std::string& what) {
+// A step's error, said with the argument and the step it came from (`what`, made only
+// then: the servo prepares every frame).
+template <typename Step, typename What>
+PointCloud step_of(Step step, const std::string& argument, What what) {
   try {
     return step();
   } catch (const std::invalid_argument& error) {
-    throw std::invalid_argument(argument + ": " + what + ": " + error.what());
+    std::ostringstream message;
+    message << argument << ": " << what() << ": " << error.what();
+    throw std::invalid_argument(message.str());
   }
 }
 
@@ -182,20 +185,27 @@ PointCloud prepare_cloud(const PointCloud& cloud, double voxel_size, bool downsa
   if (!(std::isfinite(voxel_size) && voxel_size > 0.0))
     fail("voxel_size must be finite and > 0 metres, got ", voxel_size);
   if (!viewpoint.allFinite()) fail(argument, ": the viewpoint must be finite");
-  std::ostringstream half, radius;
-  half << "downsampling to half of voxel_size = " << voxel_size << " m";
-  radius << "estimating normals over a radius of 2 x voxel_size = " << 2.0 * voxel_size << " m";
   PointCloud prepared =
-      downsample
-          ? step_of([&] { return voxel_downsample(cloud, 0.5 * voxel_size); }, argument, half.str())
-          : cloud;
+      downsample ? step_of([&] { return voxel_downsample(cloud, 0.5 * voxel_size); }, argument,
+                           [&] {
+                             std::ostringstream what;
+                             what << "downsampling to half of voxel_size = " << voxel_size << " m";
+                             return what.str();
+                           })
+                 : cloud;
   if (prepared.has_normals()) return prepared;
   NormalEstimationParams normals;
   normals.radius = 2.0 * voxel_size;
   normals.viewpoint = viewpoint;
   normals.orientation = inside_box(prepared, viewpoint) ? NormalOrientation::outward
                                                         : NormalOrientation::toward_viewpoint;
-  return step_of([&] { return estimate_normals(prepared, normals); }, argument, radius.str());
+  return step_of(
+      [&] { return estimate_normals(prepared, normals); }, argument,
+      [&] {
+        std::ostringstream what;
+        what << "estimating normals over a radius of 2 x voxel_size = " << 2.0 * voxel_size << " m";
+        return what.str();
+      });
 }
 
 }  // namespace spectral_vs
