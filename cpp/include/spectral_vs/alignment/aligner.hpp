@@ -357,9 +357,10 @@ struct AlignResult {
   /// The pose rests on the scene's support plane, or on an upward-facing surface of the
   /// scene just under its lowest points (within 1.5 voxels). False only where a support
   /// plane was found (search.global_search and scene.suppress_support_plane on, a plane
-  /// wider than 4 model reaches holding over a fifth of the scene's points) and the pose neither touches it nor stands on
-  /// anything: a flat object flush with another object's face, the rest of it inside
-  /// that object. With verification.expect_resting such a pose is `floating`.
+  /// wider than 4 model reaches holding over a fifth of the scene's points) and the pose
+  /// neither touches it nor stands on anything: a flat object flush with another object's
+  /// face, the rest of it inside that object. With verification.expect_resting such a
+  /// pose is `floating`. True also where no plane was sought (not known to float).
   bool rests = true;
   /// The probability that the pose is right (within 5 degrees and 10 mm), in [0, 1]: `score`
   /// through the calibration map fitted on the calibration set (calibrated_confidence).
