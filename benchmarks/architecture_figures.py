@@ -41,19 +41,22 @@ GROUP_READ = re.compile(r"(?:params(?:\(\))?|problem)\.(" + "|".join(STAGE_GROUP
 ALIGN_STAGES = (
     ("scene preparation", ("prepared.hpp", "scene_preparation.cpp", "support_plane.cpp")),
     ("hypotheses", ("hypotheses.cpp", "hypothesis.hpp")),
-    ("refinement", ("refinement.cpp", "refinement.hpp", "algorithm1.cpp", "icp_refinement.cpp")),
+    (
+        "refinement",
+        ("refinement.cpp", "refinement.hpp", "polish.cpp", "algorithm1.cpp", "icp_refinement.cpp"),
+    ),
     (
         "verification, alternatives, reselection",
         ("verifier.cpp", "alternatives.cpp", "reselection.cpp", "part_coverage.cpp", "resting.cpp"),
     ),
-    ("verdict", ("verdict.cpp",)),
+    ("verdict", ("verdict.cpp", "covariance.cpp")),
 )
 #: align_views()' stages in order, and their files.
 VIEW_STAGES = (
     ("preparation", ("view_preparation.cpp", "view_scale.cpp")),
     ("hypotheses", ("view_hypotheses.cpp",)),
-    ("refinement", ("view_refinement.cpp",)),
-    ("verdict", ("view_verdict.cpp",)),
+    ("refinement: align()'s, configured by the views' data", ("view_aligner.cpp",)),
+    ("verification, then align()'s verdict", ("view_verification.cpp",)),
 )
 
 

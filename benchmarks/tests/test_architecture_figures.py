@@ -29,7 +29,8 @@ def test_a_step_gates_the_frame_then_relocalizes_then_tracks_then_commands():
     assert {part for part, _ in calls} <= set(figures.servo_parts().values()) | {"SpectralServo"}
 
 
-def test_the_view_stages_share_the_hypothesis_and_algorithm_1():
+def test_the_view_stages_share_the_hypothesis_the_refinement_and_the_verdict():
     assert "hypothesis" in figures.shared_headers("view_stages.hpp")
-    assert "algorithm1" in figures.shared_headers("view_refinement.cpp")
-    assert not any(h.startswith("view_") for h in figures.shared_headers("view_verdict.cpp"))
+    assert "refinement" in figures.shared_headers("view_aligner.cpp")
+    assert "verdict_detail" in figures.shared_headers("view_verification.cpp")
+    assert not any(h.startswith("view_") for h in figures.shared_headers("view_verification.cpp"))

@@ -1,11 +1,15 @@
-// align()'s stages on their own (stages.hpp), each against a known truth rather than
-// through align(): the hypotheses of the global search, Algorithm 1 from one hypothesis,
-// and the model's near-symmetries the alternatives start from.
+// The stages on their own (stages.hpp), each against a known truth rather than through
+// align(): the hypotheses of the global search, the refinement's two steps (both modes')
+// and Algorithm 1 from one hypothesis, the model's near-symmetries the alternatives start
+// from, and the one verdict of both modes.
 
 #include "alignment/alternatives.hpp"
 #include "alignment/hypotheses.hpp"
+#include "alignment/polish.hpp"
 #include "alignment/prepared.hpp"
 #include "alignment/refinement.hpp"
+#include "alignment/scale.hpp"
+#include "alignment/verdict_detail.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
@@ -141,6 +145,76 @@ TEST(Refinement, BothModesKeepAlgorithmOnesEndAndTheICPByOneRuleEach) {
   EXPECT_TRUE(keeps_icp(0.90, 0.80));
 }
 
+// The refinement's first step, as both modes run it: the loop's end, scored by the mode's
+// measure, unless the start scores higher; then the start itself, claiming no iterations.
+TEST(Refinement, AlgorithmOneStepKeepsItsEndUnlessTheStartScoresHigher) {
+  const MovedObject object(3);
+  Stages stages(object);
+  const double voxel = object.params.scene.voxel_size;
+  Transform start_T = object.T_scene_model;
+  start_T.topLeftCorner<3, 3>() = about({0.3, -1.0, 0.4}, 8.0) * start_T.topLeftCorner<3, 3>();
+  start_T.topRightCorner<3, 1>() += Eigen::Vector3d(0.006, -0.004, 0.005);
+  const Pose start = stages.moving.pose_of(start_T);
+  const Algorithm1Problem loop{stages.prepared.correlation,
+                               stages.prepared.scene_coefficients,
+                               stages.prepared.model_coefficients,
+                               stages.moving,
+                               object.params.local,
+                               voxel,
+                               object.params.scene.bandwidth};
+  const PoseScore fitness = [&](const Pose& pose) {
+    return stages.moving.fitness(stages.prepared.verifier, pose, voxel);
+  };
+  const double start_fitness = fitness(start);
+  WindowCache windows;
+  // A start that scores lower: the loop's end, at the truth and fitter than the start.
+  const AlignResult ended =
+      algorithm1_step(loop, windows.at(stages.problem, stages.moving.centre(start)), 30, start,
+                      start_fitness, fitness);
+  EXPECT_NE(ended.stop_reason, AlignStopReason::kept_start);
+  EXPECT_GT(ended.iterations, 0);
+  EXPECT_EQ(int(ended.history.size()), ended.iterations);
+  const auto [degrees, metres] = object.error(ended.T_scene_model);
+  EXPECT_LT(degrees, 1.0);
+  EXPECT_LT(metres, 0.002);
+  EXPECT_GT(ended.fitness, start_fitness);
+  // A start that scores higher than any end can (a fitness is at most 1): the start.
+  const AlignResult kept = algorithm1_step(
+      loop, windows.at(stages.problem, stages.moving.centre(start)), 30, start, 1.5, fitness);
+  EXPECT_EQ(kept.stop_reason, AlignStopReason::kept_start);
+  EXPECT_FALSE(kept.converged);
+  EXPECT_EQ(kept.iterations, 0);
+  EXPECT_TRUE(kept.history.empty());
+  EXPECT_EQ(kept.fitness, 1.5);
+  EXPECT_EQ(kept.translation_peak, 0.0);
+  EXPECT_TRUE(kept.T_scene_model.isApprox(start_T, 1e-12));
+  EXPECT_NEAR(kept.correlation, stages.prepared.correlation.evaluate(start.R).value, 1e-12);
+}
+
+// The refinement's last step: the ICP's pose replaces the one it started from unless it
+// took no step or scores more than kIcpScoreLoss lower.
+TEST(Refinement, TheIcpStepTakesTheIcpsPoseUnlessItSlidesOff) {
+  AlignResult result;
+  result.fitness = 0.80;
+  IcpOutcome icp;
+  icp.T_scene_model.topRightCorner<3, 1>() << 0.004, 0.0, -0.002;
+  double icp_score = 0.95;
+  const TransformScore score = [&](const Transform&) { return icp_score; };
+  take_icp(icp, score, result);  // no step taken
+  EXPECT_TRUE(result.T_scene_model.isIdentity());
+  EXPECT_EQ(result.icp_iterations, 0);
+  icp.iterations = 4;
+  icp_score = 0.80 - kIcpScoreLoss - 0.01;  // slid off
+  take_icp(icp, score, result);
+  EXPECT_TRUE(result.T_scene_model.isIdentity());
+  EXPECT_EQ(result.fitness, 0.80);
+  icp_score = 0.78;  // a small loss at a voxel's tolerance: a precise pose, kept
+  take_icp(icp, score, result);
+  EXPECT_EQ(result.T_scene_model, icp.T_scene_model);
+  EXPECT_EQ(result.fitness, 0.78);
+  EXPECT_EQ(result.icp_iterations, 4);
+}
+
 TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
   const MovedObject object(3);
   Stages stages(object);
@@ -188,6 +262,67 @@ TEST(Symmetries, OfABoxBeginWithItsThreeHalfTurns) {
       nearest = std::min(nearest, angle_deg(symmetries[i].transpose() * half_turn));
     EXPECT_LT(nearest, 2.0) << "the half turn about axis " << axis;
   }
+}
+
+// The one verdict of both modes (judge_pose), on its own: the true pose of an object with
+// no symmetry, well scored, is reliable and determined to a fraction of a degree and a
+// millimetre; each reason not to act, set alone, is named, and an alternative that is no
+// symmetry of the object makes the answer ambiguous.
+TEST(Verdict, JudgesAVerifiedPoseAndNamesEachReasonNotToAct) {
+  const MovedObject object(6);
+  const double voxel = object.params.scene.voxel_size;
+  const Verifier verifier(object.scene, voxel, std::nullopt);
+  VerdictCase c;
+  c.score = 0.95;
+  c.T = object.T_scene_model;
+  c.inlier_distance = voxel;
+  c.voxel_size = voxel;
+  c.model_extent = typical_size(object.model.points());
+  c.scene_extent = typical_size(object.scene.points());
+  c.supported = true;
+  const auto pose_of = [](const AlignAlternative& a) { return a.T_scene_model; };
+  std::vector<AlignAlternative> none;
+  const auto status = [&](const VerdictCase& v) {
+    return judge_pose(v, object.model, verifier.fine_grid(), none, pose_of).conclusion;
+  };
+  const Judgement right = judge_pose(c, object.model, verifier.fine_grid(), none, pose_of);
+  EXPECT_EQ(right.conclusion.status, Verdict::reliable);
+  EXPECT_TRUE(right.conclusion.reliable);
+  EXPECT_TRUE(right.conclusion.determined);
+  EXPECT_FALSE(right.ambiguous);
+  EXPECT_GT(right.conclusion.confidence, 0.9);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LT(std::sqrt(right.covariance(i, i)) / kDeg, 0.2) << "rotation " << i;
+    EXPECT_LT(std::sqrt(right.covariance(3 + i, 3 + i)), 0.001) << "translation " << i;
+  }
+  VerdictCase v = c;
+  v.rests = false;
+  EXPECT_EQ(status(v).status, Verdict::floating);
+  v = c;
+  v.score = 0.05;
+  EXPECT_EQ(status(v).status, Verdict::doubtful);
+  v = c;
+  v.supported = false;
+  EXPECT_EQ(status(v).status, Verdict::no_support);
+  EXPECT_EQ(status(v).confidence, 0.0);
+  v = c;
+  v.voxel_size = c.model_extent;  // a voxel as large as the object
+  EXPECT_EQ(status(v).status, Verdict::bad_scale);
+  EXPECT_EQ(status(v).confidence, 0.0);
+  v = c;
+  v.timed_out = true;
+  EXPECT_EQ(status(v).status, Verdict::max_seconds);
+  EXPECT_FALSE(status(v).reliable);
+  // The model turned a quarter turn about its own x axis: no symmetry of a box with a
+  // sphere beside it.
+  std::vector<AlignAlternative> alternatives(1);
+  alternatives[0].T_scene_model = c.T;
+  alternatives[0].T_scene_model.topLeftCorner<3, 3>() =
+      c.T.topLeftCorner<3, 3>() * about(Eigen::Vector3d::UnitX(), 90.0);
+  const Judgement other = judge_pose(c, object.model, verifier.fine_grid(), alternatives, pose_of);
+  EXPECT_FALSE(alternatives[0].symmetric);
+  EXPECT_TRUE(other.ambiguous);
+  EXPECT_EQ(other.conclusion.status, Verdict::ambiguous);
 }
 
 }  // namespace

@@ -81,7 +81,9 @@ TEST(ViewHypotheses, TheBestSupportedIsTheTrueMotionWithinTheSearchGrid) {
   const std::vector<Hypothesis> ranked = hypotheses(views);
   ASSERT_FALSE(ranked.empty());
   for (std::size_t i = 0; i < ranked.size(); ++i) {
-    if (i > 0) EXPECT_GE(ranked[i - 1].support.score, ranked[i].support.score) << "best first";
+    if (i > 0) {
+      EXPECT_GE(ranked[i - 1].support.score, ranked[i].support.score) << "best first";
+    }
     EXPECT_EQ(ranked[i].fitness, ranked[i].support.score) << "ranked by its support";
   }
   const auto [degrees, metres] = pair.error(views.model.transform_of(ranked.front().pose));

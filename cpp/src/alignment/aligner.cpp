@@ -11,6 +11,7 @@
 #include "alignment/hypotheses.hpp"
 #include "alignment/part_coverage.hpp"
 #include "alignment/point_sets.hpp"
+#include "alignment/polish.hpp"
 #include "alignment/prepared.hpp"
 #include "alignment/refinement.hpp"
 #include "alignment/reselection.hpp"

@@ -8,6 +8,7 @@
 #include "alignment/align_detail.hpp"
 #include "alignment/moving_model.hpp"
 #include "alignment/point_sets.hpp"
+#include "alignment/polish.hpp"
 #include "alignment/refinement.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/scene_map.hpp"
@@ -170,7 +171,7 @@ struct ModelAligner::Impl {
     timings.fitness = seconds_since(t);
     if (params.local.icp) {
       t = Clock::now();
-      detail::refine_with_icp(
+      detail::icp_step(
           model, scene, voxel_size, detail::local_icp_settings(detail::declared_viewpoint(params)),
           dense_model, [&](const Transform& T) { return fitness_of(pose_of(T)); }, result);
       timings.icp = seconds_since(t);

@@ -1,24 +1,15 @@
+// The refinement stage: its two steps, both modes', and align()'s configuration of them.
 #include "alignment/refinement.hpp"
 
-#include <spectral_vs/rotation/so3.hpp>
-
 #include "alignment/align_detail.hpp"
-#include "alignment/icp_refinement.hpp"
 #include "alignment/point_sets.hpp"
 
-#include <algorithm>
-#include <array>
-#include <cmath>
+#include <stdexcept>
+#include <vector>
 
 namespace spectral_vs::detail {
 
 namespace {
-
-// The rotation steps of the final polish, radians: 4 down to 1/4 degree.
-constexpr double kPolishFirstStep = 4.0 * M_PI / 180.0;
-constexpr double kPolishLastStep = 0.25 * M_PI / 180.0;
-constexpr int kPolishFirstStepRounds = 5;  // at most 20 degrees walked at the first step
-constexpr double kPolishMinDensity = 2.0;  // model points per occupied voxel
 
 // The EGI of the scene points in a window: in clutter, the object's own normals
 // rather than the whole scene's.
@@ -31,118 +22,6 @@ std::optional<ShCoefficients> window_coefficients(const SceneMap& scene,
   if (rows.size() < 3) return std::nullopt;
   return egi_coefficients(detail::rows_of(scene.cloud().normals(), rows), params.scene.bandwidth,
                           params.scene.egi_method);
-}
-
-// Re-places `trial`'s translation by phase correlation in the window; its voxel overlap.
-double placed_overlap(const Problem& problem, TranslationWindow& window, Pose& trial,
-                      int& evaluations) {
-  trial.offset += window.estimate(problem.model.move(trial)).shift;
-  ++evaluations;
-  return window.overlap(problem.model.move(trial));
-}
-
-// Beyond the paper: with noisy normals the EGI correlation peaks about a degree from the
-// truth, and it cannot see small asymmetric parts (a mug's handle). The 3D voxel
-// correlation sees the whole shape: the rotation is polished for the best overlap of the
-// model's voxels with the window's, the translation re-placed by phase correlation at
-// each trial. Per
-// step size (4 down to 1/4 degree), trials at +-step about each model axis give a
-// parabola per axis, whose vertex is tried as one combined step; the best trial wins.
-Pose polish_pattern(const Problem& problem, TranslationWindow& window, Pose pose,
-                    int& evaluations) {
-  window.follow(problem.model.centre(pose));
-  const auto place = [&](Pose& trial) {
-    return placed_overlap(problem, window, trial, evaluations);
-  };
-  double best = place(pose);
-  int rounds_at_first_step = 0;
-  for (double step = kPolishFirstStep; step >= kPolishLastStep;) {
-    Eigen::Vector3d vertex = Eigen::Vector3d::Zero();
-    Pose best_trial = pose;
-    double best_trial_peak = best;
-    for (int axis = 0; axis < 3; ++axis) {
-      double peaks[2];
-      for (int side = 0; side < 2; ++side) {
-        Pose trial = pose;
-        trial.R = pose.R * exp_so3((side ? step : -step) * Eigen::Vector3d::Unit(axis));
-        peaks[side] = place(trial);
-        if (peaks[side] > best_trial_peak) {
-          best_trial_peak = peaks[side];
-          best_trial = trial;
-        }
-      }
-      const double curvature = peaks[0] + peaks[1] - 2.0 * best;
-      if (curvature < 0.0)
-        vertex[axis] = std::clamp(0.5 * step * (peaks[0] - peaks[1]) / curvature, -step, step);
-    }
-    Pose combined = pose;
-    combined.R = pose.R * exp_so3(vertex);
-    const double combined_peak = vertex.isZero() ? -1.0 : place(combined);
-    if (combined_peak > best_trial_peak) {
-      best_trial_peak = combined_peak;
-      best_trial = combined;
-    }
-    const bool improved = best_trial_peak > best;
-    if (improved) {
-      best = best_trial_peak;
-      pose = best_trial;
-    }
-    // The first step size walks on while it improves (a pose a few steps off, such as a
-    // mug turned about its axis); the finer ones refine once each.
-    if (!(improved && step == kPolishFirstStep && ++rounds_at_first_step < kPolishFirstStepRounds))
-      step *= 0.5;
-  }
-  return pose;
-}
-
-// Points per occupied voxel of the model: below kPolishMinDensity the voxel overlap
-// compares two sparse samplings more than two surfaces (a 400-point scan of a bunny at 8
-// mm voxels has about one point per voxel), and the polish would only add noise.
-double points_per_voxel(const Points& points, double voxel_size) {
-  std::vector<std::array<long, 3>> voxels;
-  voxels.reserve(std::size_t(points.rows()));
-  for (Eigen::Index i = 0; i < points.rows(); ++i) {
-    const Eigen::Array3d v = (points.row(i).transpose() / voxel_size).array().floor();
-    voxels.push_back({long(v.x()), long(v.y()), long(v.z())});
-  }
-  std::sort(voxels.begin(), voxels.end());
-  const auto distinct = std::unique(voxels.begin(), voxels.end()) - voxels.begin();
-  return distinct ? double(points.rows()) / double(distinct) : 0.0;
-}
-
-// The turns of the model about its flat axis, every kFlatAxisStep, each placed by phase
-// correlation and scored by voxel overlap: the best.
-Pose sweep_flat_axis(const Problem& problem, TranslationWindow& window, const Pose& pose,
-                     const Eigen::Vector3d& axis, int& evaluations) {
-  window.follow(problem.model.centre(pose));
-  Pose best = pose;
-  double best_overlap = placed_overlap(problem, window, best, evaluations);
-  const int turns = static_cast<int>(std::lround(2.0 * M_PI / kFlatAxisStep));
-  for (int k = 1; k < turns; ++k) {
-    Pose trial = pose;
-    trial.R = pose.R * exp_so3(double(k) * kFlatAxisStep * axis);
-    const double overlap = placed_overlap(problem, window, trial, evaluations);
-    if (overlap > best_overlap) {
-      best_overlap = overlap;
-      best = trial;
-    }
-  }
-  return best;
-}
-
-// The pose of `result` moved by `step` (the flat-axis sweep or the pattern search) in a
-// window placed around it; left as it is for a model too sparse for the voxel overlap.
-template <typename Step>
-void polish_result(const Problem& problem, WindowCache& windows, AlignResult& result, Step step) {
-  const Pose start = problem.model.pose_of(result.T_scene_model);
-  if (points_per_voxel(problem.model.move(start), problem.params.scene.voxel_size) <
-      kPolishMinDensity)
-    return;
-  const Pose polished =
-      step(windows.at(problem, problem.model.centre(start)), start, result.polish_evaluations);
-  result.T_scene_model = problem.model.transform_of(polished);
-  result.fitness =
-      problem.model.fitness(problem.verifier, polished, problem.params.scene.voxel_size);
 }
 
 }  // namespace
@@ -189,46 +68,23 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
       // A window whose normals have no structure (a uniform EGI): keep the scene's.
     }
   }
-  So3Correlation& correlation = local_correlation ? *local_correlation : scene_correlation;
-  const ShCoefficients& coefficients = local_correlation ? *local : scene_coefficients;
+  const Algorithm1Problem loop{local_correlation ? *local_correlation : scene_correlation,
+                               local_correlation ? *local : scene_coefficients,
+                               problem.model_coefficients,
+                               problem.model,
+                               problem.params.local,
+                               problem.params.scene.voxel_size,
+                               problem.params.scene.bandwidth,
+                               problem.deadline};
+  const PoseScore fitness = [&](const Pose& pose) {
+    return problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
+  };
   AlignResult result =
-      algorithm1_with_fitness(problem, correlation, coefficients, hypothesis.pose,
-                              windows.at(problem, problem.model.centre(hypothesis.pose)),
-                              problem.params.refinement.refinement_iterations);
+      algorithm1_step(loop, windows.at(problem, problem.model.centre(hypothesis.pose)),
+                      problem.params.refinement.refinement_iterations, hypothesis.pose,
+                      fitness(hypothesis.pose), fitness);
   result.hypothesis = hypothesis.index;
-  // In clutter the window's EGI holds other objects' normals too, and Algorithm 1 can
-  // walk off a right hypothesis: the fitter of the two poses is kept.
-  const double start_fitness =
-      problem.model.fitness(problem.verifier, hypothesis.pose, problem.params.scene.voxel_size);
-  if (!keeps_algorithm1(result.fitness, start_fitness)) {
-    // The returned pose is then not where this run ended: it claims no iterations.
-    result.T_scene_model = problem.model.transform_of(hypothesis.pose);
-    result.fitness = start_fitness;
-    result.correlation = correlation.evaluate(hypothesis.pose.R).value;
-    result.translation_peak = 0.0;
-    result.converged = false;
-    result.stop_reason = AlignStopReason::kept_start;
-    result.iterations = 0;
-    result.history.clear();
-  }
   return result;
-}
-
-bool dense_for_polish(const Points& model_points, double voxel_size) {
-  return points_per_voxel(model_points, voxel_size) >= kPolishMinDensity;
-}
-
-void sweep_result_about(const Problem& problem, WindowCache& windows, AlignResult& result,
-                        const Eigen::Vector3d& axis) {
-  polish_result(problem, windows, result, [&](TranslationWindow& w, const Pose& p, int& n) {
-    return sweep_flat_axis(problem, w, p, axis, n);
-  });
-}
-
-void polish_result_rotation(const Problem& problem, WindowCache& windows, AlignResult& result) {
-  polish_result(problem, windows, result, [&](TranslationWindow& w, const Pose& p, int& n) {
-    return polish_pattern(problem, w, p, n);
-  });
 }
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
@@ -238,7 +94,7 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
   if (local) settings = local_icp_settings(problem.viewpoint);
   const double voxel_size = problem.params.scene.voxel_size;
   // The fine stage only for a densely sampled model (kIcpFineDistance).
-  refine_with_icp(
+  icp_step(
       model, scene, voxel_size, settings, problem.dense_model,
       [&](const Transform& T) {
         return problem.model.fitness(problem.verifier, problem.model.pose_of(T), voxel_size);
@@ -246,17 +102,31 @@ void refine_with_icp(const Problem& problem, const PointCloud& model, const Poin
       result);
 }
 
-void refine_with_icp(const PointCloud& model, const PointCloud& scene, double voxel_size,
-                     const IcpSettings& settings, bool fine,
-                     const std::function<double(const Transform&)>& fitness_of,
-                     AlignResult& result) {
-  const IcpOutcome icp =
-      refine_in_two_stages(model, scene, result.T_scene_model, voxel_size, settings, fine);
+AlignResult algorithm1_step(const Algorithm1Problem& loop, TranslationSource& source,
+                            int max_iterations, const Pose& start, double start_score,
+                            const PoseScore& score) {
+  Pose pose = start;
+  AlignResult result = run_algorithm1(loop, pose, source, max_iterations);
+  result.fitness = score(pose);
+  if (keeps_algorithm1(result.fitness, start_score)) return result;
+  // The returned pose is then not where this run ended: it claims no iterations.
+  result.T_scene_model = loop.model.transform_of(start);
+  result.fitness = start_score;
+  result.correlation = loop.correlation.evaluate(start.R).value;
+  result.translation_peak = 0.0;
+  result.converged = false;
+  result.stop_reason = AlignStopReason::kept_start;
+  result.iterations = 0;
+  result.history.clear();
+  return result;
+}
+
+void take_icp(const IcpOutcome& icp, const TransformScore& score, AlignResult& result) {
   if (icp.iterations == 0) return;
-  const double fitness = fitness_of(icp.T_scene_model);
-  if (!keeps_icp(fitness, result.fitness)) return;
+  const double icp_score = score(icp.T_scene_model);
+  if (!keeps_icp(icp_score, result.fitness)) return;
   result.T_scene_model = icp.T_scene_model;
-  result.fitness = fitness;
+  result.fitness = icp_score;
   result.icp_iterations = icp.iterations;
 }
 

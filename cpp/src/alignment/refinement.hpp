@@ -1,8 +1,12 @@
 #pragma once
-// Internal to align(), its third stage: from each hypothesis, Algorithm 1 (the paper's
-// loop, algorithm1.hpp) on the scene around it; then, beyond the paper, the sweep of
-// the turns about a flat axis, the polish of the rotation on the voxel overlap, and the
-// point-to-plane ICP.
+// The refinement stage of both modes (docs/architecture.md): from a hypothesis, Algorithm
+// 1 (the paper's loop, algorithm1.hpp), its end kept by keeps_algorithm1, then the
+// two-stage point-to-plane ICP, its pose kept by keeps_icp. The modes differ in data only:
+// the EGI correlation and the translation source the loop runs on, the score a pose is
+// kept by (align: the screen's fitness; align_views: the support's score), and what the
+// ICP pairs with. align() configures it here (refine_hypothesis, SceneThenWindow,
+// refine_with_icp) and, beyond the paper, sweeps and polishes between the two steps
+// (polish.hpp); align_views() configures it in view_aligner.cpp.
 
 #include <spectral_vs/rotation/so3_correlation.hpp>
 
@@ -14,6 +18,38 @@
 #include <optional>
 
 namespace spectral_vs::detail {
+
+/// A mode's score of a pose of its moving model, which Algorithm 1's step keeps by.
+using PoseScore = std::function<double(const Pose&)>;
+/// The same score of a pose given as T_scene_model, which the ICP's step keeps by.
+using TransformScore = std::function<double(const Transform&)>;
+
+/// The refinement's first step, both modes': Algorithm 1 from `start`, which scores
+/// `start_score`, for at most `max_iterations`. The loop's result (run_algorithm1) with its
+/// end's `score` as fitness, unless keeps_algorithm1 keeps the start: then the start, which
+/// claims no iterations (stop_reason kept_start, not converged, the correlation at the
+/// start, no translation peak).
+AlignResult algorithm1_step(const Algorithm1Problem& loop, TranslationSource& source,
+                            int max_iterations, const Pose& start, double start_score,
+                            const PoseScore& score);
+
+/// The ICP's outcome, scored by `score`, replaces result's pose (T_scene_model, fitness,
+/// icp_iterations) when it took a step and keeps_icp keeps it.
+void take_icp(const IcpOutcome& icp, const TransformScore& score, AlignResult& result);
+
+/// The refinement's last step, both modes': the two-stage ICP (refine_in_two_stages;
+/// `fine`: its tighter second stage too) from result.T_scene_model against `scene` (a
+/// PointCloud: neighbour grids made per stage around the model; an IcpScene: made once),
+/// kept by take_icp.
+template <class Scene>
+void icp_step(const PointCloud& model, const Scene& scene, double voxel_size,
+              const IcpSettings& settings, bool fine, const TransformScore& score,
+              AlignResult& result) {
+  take_icp(refine_in_two_stages(model, scene, result.T_scene_model, voxel_size, settings, fine),
+           score, result);
+}
+
+// --- align()'s configuration --------------------------------------------------------------
 
 // The paper's translation source: the grid over the whole scene until a step fits in a
 // window (the model is near), then a window that follows the model. A bounded grid
@@ -60,29 +96,10 @@ AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_corr
                               const ShCoefficients& scene_coefficients,
                               const Hypothesis& hypothesis, WindowCache& windows);
 
-/// The model is dense enough for the voxel overlap of the sweep and the polish.
-bool dense_for_polish(const Points& model_points, double voxel_size);
-
-/// The result turned to the best of its turns about the model's flat axis `axis`.
-void sweep_result_about(const Problem& problem, WindowCache& windows, AlignResult& result,
-                        const Eigen::Vector3d& axis);
-
-/// The result's rotation polished on the voxel overlap (a pattern search).
-void polish_result_rotation(const Problem& problem, WindowCache& windows, AlignResult& result);
-
-/// The ICP refinement of a result (AlignParams::refinement.icp_refinement, or
-/// LocalParams::icp when `local`: local_icp_settings), against the whole scene; kept
-/// unless it loses fitness.
+/// align()'s ICP step (AlignParams::refinement.icp_refinement, or LocalParams::icp when
+/// `local`: local_icp_settings) against the whole scene, kept by the screen's fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
                      AlignResult& result, bool local = false);
-
-/// The two-stage point-to-plane ICP of `result`'s pose (`fine`: the second, tighter stage
-/// too), kept unless its fitness (`fitness_of` a pose) is more than a slide off the object
-/// below the result's: the one rule of both modes' ICP.
-void refine_with_icp(const PointCloud& model, const PointCloud& scene, double voxel_size,
-                     const IcpSettings& settings, bool fine,
-                     const std::function<double(const Transform&)>& fitness_of,
-                     AlignResult& result);
 
 /// `a` is a better result than `b`: fitter, or as fit and better correlated.
 bool better(const AlignResult& a, const AlignResult& b);

@@ -1,5 +1,6 @@
 #pragma once
-// Internal to the verdict stage: the covariance on a scene's neighbour grid made once.
+// Internal to the verdict stage, the last of both modes: one verdict (judge_pose) of a
+// verified pose, whichever mode verified it, and its pieces.
 
 #include <spectral_vs/alignment/aligner.hpp>
 #include <spectral_vs/alignment/verdict.hpp>
@@ -7,6 +8,7 @@
 #include "alignment/icp_refinement.hpp"
 #include "alignment/verifier.hpp"
 
+#include <utility>
 #include <vector>
 
 namespace spectral_vs::detail {
@@ -61,6 +63,55 @@ struct Conclusion {
 };
 Conclusion conclude(VerdictInputs inputs, const PoseCovariance& covariance,
                     const Eigen::Vector3d& centre);
+
+/// What the verdict reads of a verified pose, in either mode.
+struct VerdictCase {
+  double score = 0.0;  ///< The verification's score, in [0, 1].
+  RegistrationKind kind = RegistrationKind::model_to_scene;  ///< Its calibration map.
+  Transform T = Transform::Identity();  ///< The pose: the verified cloud in the scene.
+  double inlier_distance = 0.0;         ///< Metres: the pairs of the covariance's fit.
+  double voxel_size = 0.0;              ///< Metres: the alignment's voxel.
+  double model_extent = 0.0;            ///< Typical size of what was aligned, metres (its scale).
+  double scene_extent = 0.0;            ///< Typical size of the scene, metres (the prior).
+  bool supported = false;               ///< Some point of the answer is supported by the scene.
+  bool timed_out = false;               ///< The time budget ran out before the search ended.
+  bool rests = true;                    ///< Not floating (or resting not expected).
+};
+
+/// The verdict of a VerdictCase.
+struct Judgement {
+  PoseCovariance covariance = PoseCovariance::Identity();
+  bool ambiguous = false;  ///< An alternative is not the same answer up to a symmetry.
+  Conclusion conclusion;   ///< determined, status, reliable, the confidence to report.
+};
+
+/// The verdict given whether the alternatives leave the answer `ambiguous`: `verified` is
+/// the cloud the verification checked at c.T (align: the model; align_views: the
+/// reference's sample), `grid` the verification's neighbour grid of the scene.
+Judgement judge_pose(const VerdictCase& c, const PointCloud& verified, const IcpScene& grid,
+                     bool ambiguous);
+
+/// The one verdict of both modes: the symmetric alternatives marked (`pose_of` gives an
+/// alternative's pose), the calibrated confidence, the covariance of the point-to-plane
+/// fit, the status and `reliable`.
+template <class Alternative, class PoseOf>
+Judgement judge_pose(const VerdictCase& c, const PointCloud& verified, const IcpScene& grid,
+                     std::vector<Alternative>& alternatives, PoseOf pose_of) {
+  const bool ambiguous =
+      mark_symmetric(alternatives, verified, c.voxel_size, c.T, std::move(pose_of));
+  return judge_pose(c, verified, grid, ambiguous);
+}
+
+/// A Judgement written into a result of either mode (AlignResult, ViewAlignResult).
+template <class Result>
+void write_judgement(const Judgement& judgement, Result& result) {
+  result.covariance = judgement.covariance;
+  result.ambiguous = judgement.ambiguous;
+  result.determined = judgement.conclusion.determined;
+  result.status = judgement.conclusion.status;
+  result.reliable = judgement.conclusion.reliable;
+  result.confidence = judgement.conclusion.confidence;
+}
 
 /// The verdict stage of align() and ModelAligner, last: `result` verified by `verifier`
 /// (its score and alternatives' scores set) gets its calibrated confidence, covariance,

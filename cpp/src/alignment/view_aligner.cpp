@@ -1,6 +1,6 @@
 // Scene-to-scene registration as a pipeline of stages (view_stages.hpp): scale,
 // preparation, hypotheses (the SO(3) search of the views' EGIs, each rotation placed by
-// phase correlation), refinement (Algorithm 1, the ICP), the verdict.
+// phase correlation), refinement (align()'s, refinement.hpp, configured here), the verdict.
 
 #include <spectral_vs/alignment/view_aligner.hpp>
 
@@ -9,6 +9,8 @@
 #include "alignment/align_detail.hpp"
 #include "alignment/icp_refinement.hpp"
 #include "alignment/moving_model.hpp"
+#include "alignment/point_sets.hpp"
+#include "alignment/refinement.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/verifier.hpp"
 #include "alignment/view_stages.hpp"
@@ -78,6 +80,70 @@ void check_views(const PointCloud& reference, const PointCloud& current,
 }
 
 }  // namespace
+
+namespace detail::views {
+
+namespace {
+
+// Translation room of Algorithm 1 around each hypothesis, in search voxels: the
+// placement is within half a search voxel, the rotation within a few degrees.
+constexpr double kRefinementRoom = 2.0;
+
+}  // namespace
+
+// Stage: refinement, the one of refinement.hpp configured by the views' data: Algorithm 1
+// on the views' EGI correlation and a grid bounded around the hypothesis, then the ICP
+// against the current view's neighbour grid, each kept by the support's score at a voxel.
+ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis) {
+  ViewAlignResult result;
+  result.hypothesis = hypothesis.index;
+  result.T_current_reference = views.model.transform_of(hypothesis.pose);
+  result.support = hypothesis.support;
+  const Eigen::AlignedBox3d box = points_box(views.model.move(hypothesis.pose));
+  // A hypothesis that moved the reference off the current view has nothing to refine on
+  // (and its grid, spanning both, could be of any size).
+  if (!box.intersects(bounding_box(views.map.cloud()))) return result;
+  SceneTranslation grid(views.map, box, kRefinementRoom * views.scale.search_voxel_size,
+                        views.scale.voxel_size, views.params.occupancy, views.phase,
+                        views.params.limits);
+  const Algorithm1Problem loop{views.correlation,
+                               views.current_coefficients,
+                               views.reference_coefficients,
+                               views.model,
+                               views.local,
+                               views.scale.voxel_size,
+                               views.params.bandwidth,
+                               views.deadline,
+                               false};  // its history is not read
+  const TransformScore support_score = [&](const Transform& T) {
+    return views.support.of(T, kCoarseTolerance).score;
+  };
+  AlignResult refined = algorithm1_step(
+      loop, grid, views.params.refinement_iterations, hypothesis.pose, hypothesis.support.score,
+      [&](const Pose& pose) { return support_score(views.model.transform_of(pose)); });
+  if (views.params.icp_refinement) {
+    IcpSettings icp;
+    icp.viewpoint = views.params.sensor_origin;
+    icp_step(views.reference, views.fine_scene, views.scale.voxel_size, icp, true, support_score,
+             refined);
+  }
+  result.T_current_reference = refined.T_scene_model;
+  result.icp_iterations = refined.icp_iterations;
+  result.support = views.support.of(result.T_current_reference, kFineTolerance);
+  return result;
+}
+
+bool refine_into(const Views& views, const std::vector<Hypothesis>& ranked, int count,
+                 std::optional<ViewAlignResult>& kept) {
+  for (std::size_t i = 0; i < std::min(std::size_t(count), ranked.size()); ++i) {
+    ViewAlignResult result = refine(views, ranked[i]);
+    if (!kept || result.support.score > kept->support.score) kept = std::move(result);
+    if (expired(views)) return false;
+  }
+  return true;
+}
+
+}  // namespace detail::views
 
 ViewSupport view_support(const PointCloud& reference_view, const PointCloud& current_view,
                          const Transform& T_current_reference, const ViewAlignParams& params) {

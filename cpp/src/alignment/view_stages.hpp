@@ -4,8 +4,10 @@
 //   view_preparation  each view's dominant plane balanced, the crop, the structure;
 //   view_hypotheses   the SO(3) search of the two EGIs, each rotation placed by phase
 //                     correlation and checked; the window search after a missed one;
-//   view_refinement   Algorithm 1 around a hypothesis, then the ICP;
-//   view_verdict      the verification of the returned pose, its alternatives, the verdict.
+//   refinement        align()'s (refinement.hpp), configured in view_aligner.cpp: Algorithm
+//                     1 on a grid bounded around a hypothesis, then the ICP;
+//   view_verification the returned pose's score and its alternatives, then the verdict
+//                     of both modes (judge_pose, verdict_detail.hpp).
 
 #include <spectral_vs/alignment/view_aligner.hpp>
 #include <spectral_vs/rotation/so3_correlation.hpp>
@@ -163,15 +165,16 @@ std::vector<Hypothesis> hypotheses(const Views& views);
 // The window search after a missed search; `windows` counts the windows searched.
 std::vector<Hypothesis> window_hypotheses(const Views& views, int first_index, int& windows);
 
-// Stage: refinement (view_refinement.cpp): one hypothesis refined.
+// Stage: refinement (view_aligner.cpp, the one of refinement.hpp): one hypothesis refined.
 ViewAlignResult refine(const Views& views, const Hypothesis& hypothesis);
 // Refines the first `count` of `ranked` (fewer if there are fewer), each kept in `kept`
 // when there is none yet or it is better supported; false once the time ran out.
 bool refine_into(const Views& views, const std::vector<Hypothesis>& ranked, int count,
                  std::optional<ViewAlignResult>& kept);
 
-// Stage: the verdict (view_verdict.cpp): `result`'s score, verification, covariance,
-// alternatives among `checked` (none when `timed_out`) and verdict.
+// Stage: verification and verdict (view_verification.cpp): `result`'s score and
+// verification, its alternatives among `checked` (none when `timed_out`), then the one
+// verdict of both modes (covariance, symmetric alternatives, status).
 void judge(const Views& views, ViewAlignResult& result, const std::vector<Hypothesis>& checked,
            bool timed_out);
 

@@ -1,5 +1,6 @@
-// Stage of align_views(): the verdict. The returned pose verified against the current
-// view, its covariance, its alternatives among the checked hypotheses, the verdict.
+// Stage of align_views(): verification. The returned pose's score against the current
+// view and its alternatives among the checked hypotheses; the verdict on them is the one
+// of both modes (judge_pose, verdict_detail.hpp).
 
 #include <spectral_vs/alignment/verdict.hpp>
 #include <spectral_vs/rotation/so3.hpp>
@@ -28,9 +29,9 @@ constexpr std::size_t kMaxViewAlternatives = 3;
 // Poses apart: over this rotation, or over a voxel between the reference's centroids.
 constexpr double kApartRadians = 5.0 * M_PI / 180.0;
 
-// Stage: the verdict. The reference (at most kVerdictPoints of it) verified against the
-// current view from its sensor; the alternatives are the best-supported other hypotheses,
-// refined by the ICP and scored alike.
+// Stage: verification, then the verdict. The reference (at most kVerdictPoints of it)
+// verified against the current view from its sensor; the alternatives are the
+// best-supported other hypotheses, refined by the ICP and scored alike.
 class ViewVerdict {
  public:
   explicit ViewVerdict(const Views& views)
@@ -59,34 +60,25 @@ class ViewVerdict {
              bool timed_out) const {
     PoseVerification v;
     result.score = score(result.T_current_reference, result.support.fitness, &v);
-    result.confidence = calibrated_confidence(result.score, RegistrationKind::view_to_view);
     result.inliers = v.inliers;
     result.inlier_fraction = v.inlier_fraction;
     result.inlier_rmse = v.inlier_rmse;
     result.inlier_distance = v.inlier_distance;
-    result.covariance =
-        detail::covariance_at(sample_, verifier_.fine_grid(), result.T_current_reference,
-                              v.inlier_distance, detail::typical_size(views_.current.points()),
-                              covariance_inflation(RegistrationKind::view_to_view));
     if (!timed_out) add_alternatives(result, checked);
-    result.ambiguous = detail::mark_symmetric(
-        result.alternatives, sample_, views_.scale.voxel_size, result.T_current_reference,
-        [](const ViewAlternative& a) { return a.T_current_reference; });
-    VerdictInputs inputs;
-    inputs.confidence = result.confidence;
-    inputs.ambiguous = result.ambiguous;
-    inputs.supported = result.support.confirmed > 0 && v.tight > 0;
-    inputs.timed_out = timed_out;
-    inputs.scale_ok =
-        voxel_in_range(views_.scale.voxel_size, detail::typical_size(views_.reference.points()));
-    const detail::Conclusion c =
-        detail::conclude(inputs, result.covariance,
-                         result.T_current_reference.topLeftCorner<3, 3>() * centroid_ +
-                             result.T_current_reference.topRightCorner<3, 1>());
-    result.determined = c.determined;
-    result.status = c.status;
-    result.reliable = c.reliable;
-    result.confidence = c.confidence;
+    detail::VerdictCase c;
+    c.score = result.score;
+    c.kind = RegistrationKind::view_to_view;
+    c.T = result.T_current_reference;
+    c.inlier_distance = v.inlier_distance;
+    c.voxel_size = views_.scale.voxel_size;
+    c.model_extent = detail::typical_size(views_.reference.points());
+    c.scene_extent = detail::typical_size(views_.current.points());
+    c.supported = result.support.confirmed > 0 && v.tight > 0;
+    c.timed_out = timed_out;
+    detail::write_judgement(
+        detail::judge_pose(c, sample_, verifier_.fine_grid(), result.alternatives,
+                           [](const ViewAlternative& a) { return a.T_current_reference; }),
+        result);
   }
 
  private:
