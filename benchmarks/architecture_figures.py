@@ -3,7 +3,8 @@
 Nothing in them is typed by hand but the stages' names and order:
 
 * ``docs/figures/architecture_align.png``: align()'s stages, each with its files and every
-  ``params.<group>.<field>`` those files read (parsed from ``cpp/src/alignment``);
+  settings group field those files read (``params.<group>.<field>``, or ``<argument>.<field>``
+  of a group a stage takes; parsed from ``cpp/src/alignment``);
 * ``docs/figures/architecture_views.png``: align_views()' stages, each with the internal
   headers of align()'s it includes (the pieces both pipelines share);
 * ``docs/figures/architecture_servo.png``: one servo step, ``SpectralServo._step_record``,
@@ -33,9 +34,19 @@ FIGURES = ROOT / "docs" / "figures"
 #: The groups a stage declares; `scene` (the unit every stage measures in) and the
 #: top-level fields (threads, limits, max_seconds, initial_guess) every stage may read.
 STAGE_GROUPS = ("search", "refinement", "local", "verification")
-#: A read: ``params.<group>.<field>`` (``params()``: ModelAligner's), or of a group a stage
-#: was handed, ``problem.<group>.<field>`` (Algorithm 1's ``problem.local``).
+#: A read through the whole settings: ``params.<group>.<field>`` (``params()``:
+#: ModelAligner's), or through a member of a struct a stage was handed,
+#: ``problem.<group>.<field>`` (Algorithm 1's ``problem.local``).
 GROUP_READ = re.compile(r"(?:params(?:\(\))?|problem)\.(" + "|".join(STAGE_GROUPS) + r")\.(\w+)")
+#: Each group's C++ type: a stage declares the groups it reads by taking them as
+#: arguments (``const GlobalSearchParams& search``), and reads them as ``<name>.<field>``.
+GROUP_TYPES = {
+    "GlobalSearchParams": "search",
+    "RefinementParams": "refinement",
+    "LocalParams": "local",
+    "VerificationParams": "verification",
+}
+GROUP_ARGUMENT = re.compile(r"const (" + "|".join(GROUP_TYPES) + r")&\s*(\w+)")
 
 #: align()'s stages in the order it runs them, and their files.
 ALIGN_STAGES = (
@@ -63,6 +74,44 @@ VIEW_STAGES = (
 # --- Reading the code ----------------------------------------------------------------------
 
 
+def code_of(text: str) -> str:
+    """C++ source without its comments (a comment names fields it does not read)."""
+    return re.sub(r"//[^\n]*", "", text)
+
+
+def function_after(code: str, start: int) -> str:
+    """From an argument at ``start`` to the end of its function's body (its constructor
+    initialisers included); empty for a declaration or a struct member (a ``;`` first)."""
+    depth = 1  # inside the argument list
+    for i in range(start, len(code)):
+        if code[i] == ";":
+            return ""
+        if code[i] in "([":
+            depth += 1
+        elif code[i] in ")]":
+            depth -= 1
+        elif code[i] == "{" and depth <= 0:
+            braces = 0
+            for j in range(i, len(code)):
+                braces += {"{": 1, "}": -1}.get(code[j], 0)
+                if braces == 0:
+                    return code[start : j + 1]
+    return ""
+
+
+def reads_in(text: str) -> set[tuple[str, str]]:
+    """The (group, field) reads of one source file: through the whole settings or a
+    member (GROUP_READ), and through each group argument, within its function."""
+    code = code_of(text)
+    found = set(GROUP_READ.findall(code))
+    for match in GROUP_ARGUMENT.finditer(code):
+        type_name, name = match.groups()
+        body = function_after(code, match.end())
+        read = re.findall(r"(?<![\w.])" + name + r"\.(\w+)\b(?!\s*\()", body)
+        found |= {(GROUP_TYPES[type_name], field) for field in read}
+    return found
+
+
 def stage_reads() -> dict[str, set[tuple[str, str]]]:
     """Per source file of align()'s stages (not align_views' view_* files), the
     (group, field) of every AlignParams group it reads."""
@@ -70,7 +119,7 @@ def stage_reads() -> dict[str, set[tuple[str, str]]]:
     for path in sorted(STAGE_SOURCES.glob("*.[ch]pp")):
         if path.name.startswith("view_"):
             continue
-        found = set(GROUP_READ.findall(path.read_text()))
+        found = reads_in(path.read_text())
         if found:
             reads[path.name] = found
     return reads

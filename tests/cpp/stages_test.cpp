@@ -61,11 +61,14 @@ struct Stages {
   explicit Stages(const MovedObject& o)
       : moving(o.model),
         prepared(o.model, o.scene, o.params, moving),
-        search_voxel(search_voxel_size(o.scene, moving.reach(), o.params)),
-        problem(prepared.problem(moving, o.params, window_margin(search_voxel, o.params),
-                                 Clock::time_point::max(),
-                                 flat_axis(prepared.model_coefficients, o.params.scene.bandwidth),
-                                 dense_for_polish(o.model.points(), o.params.scene.voxel_size))) {}
+        search_voxel(
+            search_voxel_size(o.scene, moving.reach(), o.params.search, o.params.scene.voxel_size)),
+        problem(prepared.problem(
+            moving, o.params,
+            window_margin(o.params.search, o.params.scene.voxel_size, search_voxel),
+            Clock::time_point::max(),
+            flat_axis(prepared.model_coefficients, o.params.scene.bandwidth),
+            dense_for_polish(o.model.points(), o.params.scene.voxel_size))) {}
 
   ScoredModel moving;
   Prepared prepared;
@@ -77,9 +80,9 @@ TEST(Hypotheses, TheFittestIsTheTruePoseWithinTheSearchGrid) {
   for (const unsigned seed : {1u, 2u}) {
     const MovedObject object(seed);
     Stages stages(object);
-    const std::vector<Hypothesis> hypotheses =
-        global_hypotheses(stages.problem, stages.prepared.correlation,
-                          stages.prepared.scene_coefficients, stages.search_voxel);
+    const std::vector<Hypothesis> hypotheses = global_hypotheses(
+        stages.problem, object.params.search, object.params.local, stages.prepared.correlation,
+        stages.prepared.scene_coefficients, stages.search_voxel);
     ASSERT_FALSE(hypotheses.empty());
     EXPECT_LE(int(hypotheses.size()), object.params.search.hypotheses);
     for (std::size_t i = 1; i < hypotheses.size(); ++i)
@@ -230,9 +233,9 @@ TEST(Refinement, AlgorithmOneFromAHypothesisOffTheTruthReachesIt) {
     hypothesis.pose = stages.moving.pose_of(start);
     hypothesis.fitness = stages.moving.fitness(stages.prepared.verifier, hypothesis.pose,
                                                object.params.scene.voxel_size);
-    const AlignResult result =
-        refine_hypothesis(stages.problem, stages.prepared.correlation,
-                          stages.prepared.scene_coefficients, hypothesis, windows);
+    const AlignResult result = refine_hypothesis(
+        stages.problem, object.params.refinement, object.params.local, stages.prepared.correlation,
+        stages.prepared.scene_coefficients, hypothesis, windows);
     const auto [degrees, metres] = object.error(result.T_scene_model);
     EXPECT_LT(degrees, 1.0) << "trial " << trial;
     EXPECT_LT(metres, 0.002) << "trial " << trial;

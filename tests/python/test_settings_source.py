@@ -23,7 +23,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-from architecture_figures import GROUP_READ, declared_reads, stage_reads, stage_table
+from architecture_figures import (
+    GROUP_READ,
+    STAGE_SOURCES,
+    declared_reads,
+    reads_in,
+    stage_reads,
+    stage_table,
+)
 from test_stubs import settable_fields as bound_settable_fields
 
 from spectral_vs import _core
@@ -334,6 +341,47 @@ def test_the_stage_reads_parser_sees_a_read_and_a_declaration():
         "`search` (hypotheses); `local.rotation_step`, the switches: `refinement` (polish, icp)"
     )
     assert groups == {"search", "refinement"} and ("local", "rotation_step") in fields
+    # A group taken as an argument is read through its name, within its function only (a
+    # So3SearchParams named `search` elsewhere, a comment, an #include are no reads).
+    source = """#include "alignment/refinement.hpp"
+    int f(const GlobalSearchParams& search, const LocalParams& local) {
+      return search.hypotheses + g(local.rotation_step);  // local.tolerance
+    }
+    Window::Window(const LocalParams& local) : bounded_(local.max_translation != 0.0) {}
+    void h(const RefinementParams& refinement);
+    void k() { So3SearchParams search; search.candidates = 4; refinement.polish(); }
+    """
+    assert reads_in(source) == {
+        ("search", "hypotheses"),
+        ("local", "rotation_step"),
+        ("local", "max_translation"),
+    }
+
+
+#: The files that hold the whole AlignParams: the pipelines that decide which stages run
+#: (aligner.cpp, model_aligner.cpp), the settings' checks, the preparation that builds
+#: every stage's Problem, and the public functions that take AlignParams.
+WHOLE_SETTINGS = {
+    "aligner.cpp",
+    "model_aligner.cpp",
+    "align_settings.cpp",
+    "align_detail.hpp",
+    "prepared.hpp",
+    "scene_preparation.cpp",
+    "scene_preparation.hpp",
+    "algorithm1.cpp",  # rotation_step_about (public)
+    "plane_turn.cpp",  # PlaneTurn (public)
+}
+
+
+def test_no_stage_holds_the_whole_settings():
+    """Every other stage takes the settings groups it reads as arguments (issue 35)."""
+    holders = {
+        path.name
+        for path in STAGE_SOURCES.glob("*.[ch]pp")
+        if re.search(r"(?<!View)AlignParams&", path.read_text())
+    }
+    assert holders <= WHOLE_SETTINGS, f"stages that take AlignParams: {holders - WHOLE_SETTINGS}"
 
 
 def test_the_servo_scores_steps_at_the_relocalization_threshold_the_cpp_default_states():

@@ -95,9 +95,9 @@ bool has_neighbourhood(const GlobalSearchParams& search) {
   return search.guess_angle_deg > 0.0 || search.guess_distance > 0.0;
 }
 
-double window_margin(double search_voxel, const AlignParams& params) {
-  if (params.search.window_margin > 0.0) return params.search.window_margin;
-  return std::max(5.0 * params.scene.voxel_size, 2.5 * search_voxel);
+double window_margin(const GlobalSearchParams& search, double voxel_size, double search_voxel) {
+  if (search.window_margin > 0.0) return search.window_margin;
+  return std::max(5.0 * voxel_size, 2.5 * search_voxel);
 }
 
 std::chrono::steady_clock::time_point deadline_of(double max_seconds,

@@ -40,7 +40,8 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
                              const AlignParams& params, ScoredModel& moving, Prepared& prepared,
                              Clock::time_point deadline) {
   const Problem problem =
-      prepared.problem(moving, params, window_margin(0.0, params), deadline, std::nullopt, true);
+      prepared.problem(moving, params, window_margin(params.search, params.scene.voxel_size, 0.0),
+                       deadline, std::nullopt, true);
   const Clock::time_point started = Clock::now();
   const Pose start = moving.pose_of(params.initial_guess);
   SceneTranslation whole_scene =
@@ -52,14 +53,14 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
                              params.scene.voxel_size, params.scene.occupancy, phase_params(params),
                              params.limits);
   WindowCache windows;
-  SceneThenWindow source(problem, whole_scene, windows);
-  AlignResult result =
-      algorithm1_with_fitness(problem, prepared.correlation, prepared.scene_coefficients, start,
-                              source, params.local.max_iterations);
+  SceneThenWindow source(problem, params.local, whole_scene, windows);
+  AlignResult result = algorithm1_with_fitness(problem, params.local, prepared.correlation,
+                                               prepared.scene_coefficients, start, source,
+                                               params.local.max_iterations);
   prepared.timings.algorithm1 = seconds_since(started);
   if (params.local.icp) {
     const StageTimer timer(&prepared.timings, &AlignTimings::icp);
-    refine_with_icp(problem, model, scene, result, /*local=*/true);
+    refine_with_icp(problem, model, scene, result, /*after_guess=*/true);
   }
   // The servo reads only the fitness; the check (AlignParams::verification.verify) is its to skip.
   const StageTimer timer(&prepared.timings, &AlignTimings::alternatives);
@@ -70,27 +71,29 @@ AlignResult align_from_guess(const PointCloud& model, const PointCloud& scene,
 
 // The second stage: hypotheses per part of the scene that could be the object, or over
 // the whole scene when it has no parts.
-std::vector<Hypothesis> hypotheses_of(const Problem& problem, Prepared& prepared,
-                                      double search_voxel, WindowCache& windows) {
-  const AlignParams& params = problem.params;
+std::vector<Hypothesis> hypotheses_of(const Problem& problem, const AlignParams& params,
+                                      Prepared& prepared, double search_voxel,
+                                      WindowCache& windows) {
   std::vector<std::vector<Eigen::Index>> parts;
   if (prepared.plane) {
     parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(),
                          params.scene.voxel_size, prepared.band, params.search.max_parts);
-    keep_parts_near_guess(problem, prepared.searched, parts);
+    keep_parts_near_guess(problem, params.search, params.initial_guess, prepared.searched, parts);
   } else if (prepared.viewpoint) {
     parts.push_back(whole_view(prepared.searched));
   }
   std::vector<Hypothesis> hypotheses;
   if (parts.empty() && !(prepared.plane && params.search.guess_distance > 0.0)) {
-    hypotheses =
-        global_hypotheses(problem, prepared.correlation, prepared.scene_coefficients, search_voxel);
-    seed_with_guess(problem, hypotheses, search_voxel);
+    hypotheses = global_hypotheses(problem, params.search, params.local, prepared.correlation,
+                                   prepared.scene_coefficients, search_voxel);
+    seed_with_guess(problem, params.search, params.initial_guess, hypotheses, search_voxel);
   } else {
     const int per_part =
         prepared.plane ? std::max(1, params.search.hypotheses / 2) : params.search.hypotheses;
-    hypotheses = part_hypotheses(problem, parts, per_part, prepared.plane.has_value(), windows);
-    seed_with_guess(problem, hypotheses, params.scene.voxel_size);
+    hypotheses = part_hypotheses(problem, params.local, parts, per_part, prepared.plane.has_value(),
+                                 windows);
+    seed_with_guess(problem, params.search, params.initial_guess, hypotheses,
+                    params.scene.voxel_size);
     turn_about_flat_axis(problem, hypotheses, params.scene.voxel_size);
   }
   return hypotheses;
@@ -130,18 +133,18 @@ bool worth_refining(const Hypothesis& hypothesis, double best_fitness, const Ali
 
 // The third stage: each refined hypothesis through Algorithm 1 and the sweep, the best
 // polished and through the ICP.
-AlignResult refine_best(const Problem& problem, const PointCloud& model, const PointCloud& scene,
-                        Prepared& prepared, const std::vector<const Hypothesis*>& refined,
-                        WindowCache& windows) {
-  const AlignParams& params = problem.params;
+AlignResult refine_best(const Problem& problem, const AlignParams& params, const PointCloud& model,
+                        const PointCloud& scene, Prepared& prepared,
+                        const std::vector<const Hypothesis*>& refined, WindowCache& windows) {
   AlignResult best;
   bool out_of_time = false;
   int runs = 0;
   for (std::size_t i = 0; i < refined.size() && !out_of_time; ++i) {
     if (i > 0 && !worth_refining(*refined[i], best.fitness, params)) continue;
     ++runs;
-    AlignResult result = refine_hypothesis(problem, prepared.correlation,
-                                           prepared.scene_coefficients, *refined[i], windows);
+    AlignResult result =
+        refine_hypothesis(problem, params.refinement, params.local, prepared.correlation,
+                          prepared.scene_coefficients, *refined[i], windows);
     // Fitness tells a mug upright from upside down only with its handle in place, and a
     // view's fitness a pose from its near-symmetric flip only at a precise pose: each
     // result is swept and refined before they are compared.
@@ -177,21 +180,23 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
                            Clock::time_point deadline) {
   AlignTimings& timings = prepared.timings;
   Clock::time_point started = Clock::now();
-  const double search_voxel = search_voxel_size(scene, moving.reach(), params);
+  const double search_voxel =
+      search_voxel_size(scene, moving.reach(), params.search, params.scene.voxel_size);
   const std::optional<Eigen::Vector3d> axis =
       flat_axis(prepared.model_coefficients, params.scene.bandwidth);
   const bool dense = dense_for_polish(model.points(), params.scene.voxel_size);
-  const Problem problem =
-      prepared.problem(moving, params, window_margin(search_voxel, params), deadline, axis, dense);
+  const Problem problem = prepared.problem(
+      moving, params, window_margin(params.search, params.scene.voxel_size, search_voxel), deadline,
+      axis, dense);
   timings.preparation += seconds_since(started);
   started = Clock::now();
   WindowCache windows;
   const std::vector<Hypothesis> hypotheses =
-      hypotheses_of(problem, prepared, search_voxel, windows);
+      hypotheses_of(problem, params, prepared, search_voxel, windows);
   timings.placement = seconds_since(started) - timings.rotation_search;
   started = Clock::now();
-  AlignResult best =
-      refine_best(problem, model, scene, prepared, refined_hypotheses(hypotheses, params), windows);
+  AlignResult best = refine_best(problem, params, model, scene, prepared,
+                                 refined_hypotheses(hypotheses, params), windows);
   timings.algorithm1 = seconds_since(started) - timings.icp;
   const StageTimer timer(&timings, &AlignTimings::alternatives);
   best.search_voxel_size = search_voxel;
@@ -208,17 +213,21 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
         {}};
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
-    find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
+    find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
+                      prepared.viewpoint, best);
     // The parts are cut only when there is an alternative to weigh (a few percent of a
     // cluttered alignment's time otherwise).
     std::optional<PartCoverage> coverage;
     if (prepared.plane && !best.alternatives.empty())
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
-    if (reselect(problem, prepared, model, coverage, best))
-      find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
+    if (reselect(problem, params.verification, prepared, model, coverage, best))
+      find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
+                        prepared.viewpoint, best);
     if (resting && params.verification.expect_resting &&
-        rest_on_support(problem, prepared, model, verifier, *resting, best))
-      find_alternatives(model, verifier, sources, params, prepared.viewpoint, best);
+        rest_on_support(problem, params.verification, params.search, prepared, model, verifier,
+                        *resting, best))
+      find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
+                        prepared.viewpoint, best);
   }
   if (resting) best.rests = resting->rests(model, best.T_scene_model);
   return best;

@@ -210,11 +210,12 @@ std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coeffi
 }
 
 void find_alternatives(const PointCloud& model, const Verifier& verifier,
-                       const AlternativeSources& sources, const AlignParams& params,
-                       const std::optional<Eigen::Vector3d>& viewpoint, AlignResult& result) {
+                       const AlternativeSources& sources, const VerificationParams& verification,
+                       double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
+                       AlignResult& result) {
   result.alternatives.clear();
   result.ambiguous = false;
-  if (params.verification.max_alternatives == 0) return;
+  if (verification.max_alternatives == 0) return;
   const Eigen::Vector3d c = model.centroid();
   const Transform& T = result.T_scene_model;
 
@@ -237,8 +238,7 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     return a.verification.inliers > b.verification.inliers;
   });
   candidates.resize(std::min<std::size_t>(
-      candidates.size(),
-      std::size_t(kRefinedPerAlternative * params.verification.max_alternatives)));
+      candidates.size(), std::size_t(kRefinedPerAlternative * verification.max_alternatives)));
   const double sparse_confidence = sparse_returned.confidence;
   // A candidate whose screened pose falls onto an earlier one's (the same symmetry proposed
   // twice, or a hypothesis that is one) is not refined on the whole model: it is that pose
@@ -248,8 +248,8 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   std::vector<Candidate> screened;
   std::vector<Transform> screened_at;
   for (const Candidate& candidate : candidates) {
-    const std::optional<Transform> at = passes_screening(
-        sparse, verifier, candidate, T, c, sparse_confidence, params.scene.voxel_size, viewpoint);
+    const std::optional<Transform> at = passes_screening(sparse, verifier, candidate, T, c,
+                                                         sparse_confidence, voxel_size, viewpoint);
     const auto same = [&](const Transform& kept) { return !apart(*at, kept, c); };
     if (!at || std::any_of(screened_at.begin(), screened_at.end(), same)) continue;
     screened.push_back(candidate);
@@ -258,23 +258,23 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
   candidates = std::move(screened);
   for (Candidate& candidate : candidates) {
     if (candidate.turn) {
-      candidate.T = refine_translation(model, verifier.fine_grid(), candidate.T,
-                                       params.scene.voxel_size, viewpoint);
+      candidate.T =
+          refine_translation(model, verifier.fine_grid(), candidate.T, voxel_size, viewpoint);
       candidate.verification = verifier.verify(model, candidate.T);
       continue;
     }
-    candidate.T = refine_by_icp(model, verifier, candidate.T, params.scene.voxel_size, viewpoint);
+    candidate.T = refine_by_icp(model, verifier, candidate.T, voxel_size, viewpoint);
     candidate.verification = verifier.verify(model, candidate.T);
   }
   std::stable_sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
     return a.verification.confidence > b.verification.confidence;
   });
   for (const Candidate& candidate : candidates) {
-    if (int(result.alternatives.size()) == params.verification.max_alternatives) break;
+    if (int(result.alternatives.size()) == verification.max_alternatives) break;
     if (candidate.verification.confidence < result.confidence - kAlternativeMargin) break;
     if (!apart(candidate.T, T, c)) continue;
     if (candidate.turn && !flat_along_turn(model, verifier, candidate, T, c, *sources.flat_axis,
-                                           params.scene.voxel_size, viewpoint))
+                                           voxel_size, viewpoint))
       continue;
     const bool distinct = std::all_of(
         result.alternatives.begin(), result.alternatives.end(),

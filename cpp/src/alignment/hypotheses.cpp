@@ -60,34 +60,35 @@ double turn_deg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
 
 }  // namespace
 
-double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params) {
-  if (params.search.search_voxel_size > 0.0) return params.search.search_voxel_size;
+double search_voxel_size(const PointCloud& scene, double reach, const GlobalSearchParams& search,
+                         double voxel_size) {
+  if (search.search_voxel_size > 0.0) return search.search_voxel_size;
   const Eigen::Vector3d extent = bounding_box(scene).sizes().array() + 4.0 * reach;
   const double fitting = std::cbrt(extent.prod() / kSearchGridVoxels);
-  return std::max(2.0 * params.scene.voxel_size, fitting);
+  return std::max(2.0 * voxel_size, fitting);
 }
 
 // Beyond the paper: the best rotations of the SO(3) search, each refined on the EGI
 // correlation and placed by a phase correlation over the whole scene (coarse voxels),
 // ranked by fitness.
-std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation& correlation,
+std::vector<Hypothesis> global_hypotheses(const Problem& problem, const GlobalSearchParams& search,
+                                          const LocalParams& local, So3Correlation& correlation,
                                           const ShCoefficients& scene_coefficients,
                                           double search_voxel) {
-  const AlignParams& params = problem.params;
-  So3SearchParams search;
-  search.candidates = params.search.hypotheses;
-  search.threads = params.threads;
+  So3SearchParams so3;
+  so3.candidates = search.hypotheses;
+  so3.threads = problem.threads;
   std::vector<RotationCandidate> candidates;
   {
     const StageTimer timer(problem.timings, &AlignTimings::rotation_search);
     candidates =
-        so3_search(scene_coefficients, problem.model_coefficients, params.scene.bandwidth, search);
+        so3_search(scene_coefficients, problem.model_coefficients, problem.scale.bandwidth, so3);
   }
   const Eigen::Vector3d start = problem.scene.cloud().centroid();
   SceneTranslation coarse(problem.scene, start, problem.model.reach(), search_voxel,
-                          params.scene.occupancy, phase_params(params), params.limits);
+                          problem.scale.occupancy, problem.phase, problem.phase.limits);
   RotationRefineParams refine;
-  refine.newton = params.local.rotation_step == RotationStep::newton;
+  refine.newton = local.rotation_step == RotationStep::newton;
   std::vector<Hypothesis> hypotheses = placed_rotations(
       candidates, correlation, refine, problem.model, start - problem.model.centroid(),
       problem.deadline, [&](const Points& at) { return coarse.estimate(at).shift; },
@@ -124,20 +125,20 @@ std::vector<Eigen::Matrix3d> part_rotations(const Problem& problem,
                                             TranslationWindow& coarse) {
   So3SearchParams search;
   search.candidates = (sparse ? kScreenedPerPlaced : kPartCandidateSurplus) * per_part;
-  search.threads = problem.params.threads;
+  search.threads = problem.threads;
   std::vector<RotationCandidate> candidates;
   {
     const StageTimer timer(problem.timings, &AlignTimings::rotation_search);
-    candidates = so3_search(coefficients, problem.model_coefficients,
-                            problem.params.scene.bandwidth, search);
+    candidates =
+        so3_search(coefficients, problem.model_coefficients, problem.scale.bandwidth, search);
   }
   std::vector<std::pair<double, Eigen::Matrix3d>> scored;
   for (const RotationCandidate& candidate : candidates) {
     double fitness = 0.0;
     if (sparse) {
       const Pose pose = placed_at_part(problem, *sparse, candidate.R, centroid, coarse);
-      fitness = sparse->fitness(problem.verifier, pose,
-                                kCoarsePlacement * problem.params.scene.voxel_size);
+      fitness =
+          sparse->fitness(problem.verifier, pose, kCoarsePlacement * problem.scale.voxel_size);
     }
     scored.emplace_back(fitness, candidate.R);
   }
@@ -154,13 +155,12 @@ std::vector<Eigen::Matrix3d> part_rotations(const Problem& problem,
 // and its best rotations are mostly other objects'. Per connected part of the scene that
 // could be the object, the SO(3) search runs on the part's own EGI, and its rotations are
 // placed by phase correlation in a window around the part at the alignment's voxel.
-std::vector<Hypothesis> part_hypotheses(const Problem& problem,
+std::vector<Hypothesis> part_hypotheses(const Problem& problem, const LocalParams& local,
                                         const std::vector<std::vector<Eigen::Index>>& parts,
                                         int per_part, bool screen, WindowCache& windows) {
-  const AlignParams& params = problem.params;
   const PointCloud& scene = problem.scene.cloud();
   RotationRefineParams refine;
-  refine.newton = params.local.rotation_step == RotationStep::newton;
+  refine.newton = local.rotation_step == RotationStep::newton;
   std::optional<ScoredModel> sparse;
   if (screen) sparse.emplace(every_nth(problem.model.cloud(), kSparseStride));
   std::vector<Hypothesis> hypotheses;
@@ -172,10 +172,10 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
     for (const Eigen::Index i : part) centroid += scene.points().row(i).transpose();
     centroid /= double(part.size());
     const ShCoefficients coefficients =
-        egi_coefficients(normals, params.scene.bandwidth, params.scene.egi_method);
+        egi_coefficients(normals, problem.scale.bandwidth, problem.scale.egi_method);
     std::optional<So3Correlation> correlation;
     try {
-      correlation.emplace(coefficients, problem.model_coefficients, params.scene.bandwidth, true);
+      correlation.emplace(coefficients, problem.model_coefficients, problem.scale.bandwidth, true);
     } catch (const std::invalid_argument&) {
       continue;  // a part whose normals have no structure
     }
@@ -184,8 +184,8 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       coarse->place(centroid);
     } else {
       coarse.emplace(problem.scene, problem.model.reach(), problem.margin, centroid,
-                     kCoarsePlacement * params.scene.voxel_size, params.scene.occupancy,
-                     phase_params(params), params.limits);
+                     kCoarsePlacement * problem.scale.voxel_size, problem.scale.occupancy,
+                     problem.phase, problem.phase.limits);
     }
     std::vector<Eigen::Matrix3d> kept;
     for (const Eigen::Matrix3d& R : part_rotations(
@@ -203,7 +203,7 @@ std::vector<Hypothesis> part_hypotheses(const Problem& problem,
       hypothesis.pose = placed_at_part(problem, problem.model, refined, centroid, *coarse);
       hypothesis.pose.offset += window.estimate(problem.model.move(hypothesis.pose)).shift;
       hypothesis.fitness =
-          problem.model.fitness(problem.verifier, hypothesis.pose, params.scene.voxel_size);
+          problem.model.fitness(problem.verifier, hypothesis.pose, problem.scale.voxel_size);
       hypotheses.push_back(hypothesis);
     }
   }
@@ -252,19 +252,19 @@ std::optional<Eigen::Vector3d> flat_axis(const ShCoefficients& model_coefficient
 
 // The initial guess as a hypothesis, ranked with the search's; with a neighbourhood, the
 // search's hypotheses outside it are dropped.
-void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses,
+void seed_with_guess(const Problem& problem, const GlobalSearchParams& search,
+                     const Transform& initial_guess, std::vector<Hypothesis>& hypotheses,
                      double tolerance) {
-  const AlignParams& params = problem.params;
   Hypothesis guess;
   guess.index = -1;
-  guess.pose = problem.model.pose_of(params.initial_guess);
+  guess.pose = problem.model.pose_of(initial_guess);
   guess.fitness = problem.model.fitness(problem.verifier, guess.pose, tolerance);
   const Eigen::Vector3d centre = problem.model.centre(guess.pose);
   const auto outside = [&](const Hypothesis& h) {
-    return (params.search.guess_angle_deg > 0.0 &&
-            turn_deg(h.pose.R, guess.pose.R) > params.search.guess_angle_deg) ||
-           (params.search.guess_distance > 0.0 &&
-            (problem.model.centre(h.pose) - centre).norm() > params.search.guess_distance);
+    return (search.guess_angle_deg > 0.0 &&
+            turn_deg(h.pose.R, guess.pose.R) > search.guess_angle_deg) ||
+           (search.guess_distance > 0.0 &&
+            (problem.model.centre(h.pose) - centre).norm() > search.guess_distance);
   };
   hypotheses.erase(std::remove_if(hypotheses.begin(), hypotheses.end(), outside), hypotheses.end());
   hypotheses.push_back(guess);

@@ -14,12 +14,15 @@
 namespace spectral_vs::detail {
 
 /// The voxel of the global search's grid over the whole scene, metres: the alignment's
-/// doubled, coarser on a large scene (AlignParams::search_voxel_size, or derived).
-double search_voxel_size(const PointCloud& scene, double reach, const AlignParams& params);
+/// `voxel_size` doubled, coarser on a large scene (search.search_voxel_size, or derived).
+double search_voxel_size(const PointCloud& scene, double reach, const GlobalSearchParams& search,
+                         double voxel_size);
 
-/// The best rotations of the SO(3) search on the whole scene's EGI, placed on the scene
-/// at `search_voxel`, fittest first.
-std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation& correlation,
+/// The best `search.hypotheses` rotations of the SO(3) search on the whole scene's EGI,
+/// refined on the EGI correlation by `local.rotation_step`'s law, placed on the scene at
+/// `search_voxel`, fittest first.
+std::vector<Hypothesis> global_hypotheses(const Problem& problem, const GlobalSearchParams& search,
+                                          const LocalParams& local, So3Correlation& correlation,
                                           const ShCoefficients& scene_coefficients,
                                           double search_voxel);
 
@@ -27,7 +30,7 @@ std::vector<Hypothesis> global_hypotheses(const Problem& problem, So3Correlation
 /// kDistinctRotationDeg apart) of the SO(3) search on each part's own EGI, placed in a
 /// window around the part, fittest first. With `screen` (clutter), the search's maxima
 /// are first placed coarsely on a sparse model and tried fittest first.
-std::vector<Hypothesis> part_hypotheses(const Problem& problem,
+std::vector<Hypothesis> part_hypotheses(const Problem& problem, const LocalParams& local,
                                         const std::vector<std::vector<Eigen::Index>>& parts,
                                         int per_part, bool screen, WindowCache& windows);
 
@@ -45,7 +48,10 @@ void turn_about_flat_axis(const Problem& problem, std::vector<Hypothesis>& hypot
 /// if it has one (model frame).
 std::optional<Eigen::Vector3d> flat_axis(const ShCoefficients& model_coefficients, int bandwidth);
 
-/// The initial guess as a hypothesis; with a neighbourhood, the ones outside it dropped.
-void seed_with_guess(const Problem& problem, std::vector<Hypothesis>& hypotheses, double tolerance);
+/// The initial guess as a hypothesis; with a neighbourhood (search.guess_angle_deg,
+/// guess_distance), the ones outside it dropped.
+void seed_with_guess(const Problem& problem, const GlobalSearchParams& search,
+                     const Transform& initial_guess, std::vector<Hypothesis>& hypotheses,
+                     double tolerance);
 
 }  // namespace spectral_vs::detail

@@ -121,14 +121,12 @@ Pose sweep_flat_axis(const Problem& problem, TranslationWindow& window, const Po
 template <typename Step>
 void polish_result(const Problem& problem, WindowCache& windows, AlignResult& result, Step step) {
   const Pose start = problem.model.pose_of(result.T_scene_model);
-  if (points_per_voxel(problem.model.move(start), problem.params.scene.voxel_size) <
-      kPolishMinDensity)
+  if (points_per_voxel(problem.model.move(start), problem.scale.voxel_size) < kPolishMinDensity)
     return;
   const Pose polished =
       step(windows.at(problem, problem.model.centre(start)), start, result.polish_evaluations);
   result.T_scene_model = problem.model.transform_of(polished);
-  result.fitness =
-      problem.model.fitness(problem.verifier, polished, problem.params.scene.voxel_size);
+  result.fitness = problem.model.fitness(problem.verifier, polished, problem.scale.voxel_size);
 }
 
 }  // namespace

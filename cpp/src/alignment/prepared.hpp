@@ -6,6 +6,7 @@
 #include <spectral_vs/rotation/egi_coefficients.hpp>
 #include <spectral_vs/rotation/so3_correlation.hpp>
 
+#include "alignment/align_detail.hpp"
 #include "alignment/fitness_map.hpp"
 #include "alignment/scene_map.hpp"
 #include "alignment/scene_preparation.hpp"
@@ -49,8 +50,10 @@ struct Prepared {
   Problem problem(ScoredModel& moving, const AlignParams& params, double margin,
                   Clock::time_point deadline, std::optional<Eigen::Vector3d> flat_axis,
                   bool dense_model) const {
-    return Problem{scene_map, verifier,  moving,      model_coefficients, params,  margin,
-                   deadline,  flat_axis, dense_model, viewpoint,          &timings};
+    return Problem{
+        scene_map,      verifier, moving,   model_coefficients, params.scene, phase_params(params),
+        params.threads, margin,   deadline, flat_axis,          dense_model,  viewpoint,
+        &timings};
   }
 
   const double band;  // of the support plane, metres

@@ -15,13 +15,13 @@ namespace {
 // rather than the whole scene's.
 std::optional<ShCoefficients> window_coefficients(const SceneMap& scene,
                                                   const Eigen::Vector3d& centre, double half_width,
-                                                  const AlignParams& params) {
+                                                  const SceneParams& scale) {
   const Eigen::AlignedBox3d box(centre - Eigen::Vector3d::Constant(half_width),
                                 centre + Eigen::Vector3d::Constant(half_width));
   const std::vector<Eigen::Index> rows = scene.points_in(box);
   if (rows.size() < 3) return std::nullopt;
-  return egi_coefficients(detail::rows_of(scene.cloud().normals(), rows), params.scene.bandwidth,
-                          params.scene.egi_method);
+  return egi_coefficients(detail::rows_of(scene.cloud().normals(), rows), scale.bandwidth,
+                          scale.egi_method);
 }
 
 }  // namespace
@@ -31,68 +31,64 @@ TranslationWindow& WindowCache::at(const Problem& problem, const Eigen::Vector3d
     window_->place(centre);
   } else {
     window_.emplace(problem.scene, problem.model.reach(), problem.margin, centre,
-                    problem.params.scene.voxel_size, problem.params.scene.occupancy,
-                    phase_params(problem.params), problem.params.limits);
+                    problem.scale.voxel_size, problem.scale.occupancy, problem.phase,
+                    problem.phase.limits);
   }
   return *window_;
 }
 
-AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& correlation,
+AlignResult algorithm1_with_fitness(const Problem& problem, const LocalParams& local,
+                                    So3Correlation& correlation,
                                     const ShCoefficients& scene_coefficients, Pose pose,
                                     TranslationSource& source, int max_iterations) {
-  const Algorithm1Problem loop{correlation,
-                               scene_coefficients,
-                               problem.model_coefficients,
-                               problem.model,
-                               problem.params.local,
-                               problem.params.scene.voxel_size,
-                               problem.params.scene.bandwidth,
-                               problem.deadline};
+  const Algorithm1Problem loop{
+      correlation, scene_coefficients,       problem.model_coefficients, problem.model,
+      local,       problem.scale.voxel_size, problem.scale.bandwidth,    problem.deadline};
   AlignResult result = run_algorithm1(loop, pose, source, max_iterations);
-  result.fitness = problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
+  result.fitness = problem.model.fitness(problem.verifier, pose, problem.scale.voxel_size);
   return result;
 }
 
-AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_correlation,
+AlignResult refine_hypothesis(const Problem& problem, const RefinementParams& refinement,
+                              const LocalParams& local, So3Correlation& scene_correlation,
                               const ShCoefficients& scene_coefficients,
                               const Hypothesis& hypothesis, WindowCache& windows) {
   const double half_width = problem.model.reach() + problem.margin;
-  const auto local = window_coefficients(problem.scene, problem.model.centre(hypothesis.pose),
-                                         half_width, problem.params);
+  const auto window_egi = window_coefficients(problem.scene, problem.model.centre(hypothesis.pose),
+                                              half_width, problem.scale);
   std::optional<So3Correlation> local_correlation;
-  if (local) {
+  if (window_egi) {
     try {
-      local_correlation.emplace(*local, problem.model_coefficients, problem.params.scene.bandwidth,
+      local_correlation.emplace(*window_egi, problem.model_coefficients, problem.scale.bandwidth,
                                 true);
     } catch (const std::invalid_argument&) {
       // A window whose normals have no structure (a uniform EGI): keep the scene's.
     }
   }
   const Algorithm1Problem loop{local_correlation ? *local_correlation : scene_correlation,
-                               local_correlation ? *local : scene_coefficients,
+                               local_correlation ? *window_egi : scene_coefficients,
                                problem.model_coefficients,
                                problem.model,
-                               problem.params.local,
-                               problem.params.scene.voxel_size,
-                               problem.params.scene.bandwidth,
+                               local,
+                               problem.scale.voxel_size,
+                               problem.scale.bandwidth,
                                problem.deadline};
   const PoseScore fitness = [&](const Pose& pose) {
-    return problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
+    return problem.model.fitness(problem.verifier, pose, problem.scale.voxel_size);
   };
-  AlignResult result =
-      algorithm1_step(loop, windows.at(problem, problem.model.centre(hypothesis.pose)),
-                      problem.params.refinement.refinement_iterations, hypothesis.pose,
-                      fitness(hypothesis.pose), fitness);
+  AlignResult result = algorithm1_step(
+      loop, windows.at(problem, problem.model.centre(hypothesis.pose)),
+      refinement.refinement_iterations, hypothesis.pose, fitness(hypothesis.pose), fitness);
   result.hypothesis = hypothesis.index;
   return result;
 }
 
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
-                     AlignResult& result, bool local) {
+                     AlignResult& result, bool after_guess) {
   IcpSettings settings;
   settings.viewpoint = problem.viewpoint;
-  if (local) settings = local_icp_settings(problem.viewpoint);
-  const double voxel_size = problem.params.scene.voxel_size;
+  if (after_guess) settings = local_icp_settings(problem.viewpoint);
+  const double voxel_size = problem.scale.voxel_size;
   // The fine stage only for a densely sampled model (kIcpFineDistance).
   icp_step(
       model, scene, voxel_size, settings, problem.dense_model,

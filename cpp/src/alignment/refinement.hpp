@@ -56,8 +56,12 @@ void icp_step(const PointCloud& model, const Scene& scene, double voxel_size,
 // (max_translation) is kept throughout.
 class SceneThenWindow : public TranslationSource {
  public:
-  SceneThenWindow(const Problem& problem, SceneTranslation& scene, WindowCache& windows)
-      : problem_(problem), scene_(scene), windows_(windows) {}
+  SceneThenWindow(const Problem& problem, const LocalParams& local, SceneTranslation& scene,
+                  WindowCache& windows)
+      : problem_(problem),
+        bounded_(local.max_translation != 0.0),
+        scene_(scene),
+        windows_(windows) {}
 
   TranslationEstimate estimate(const Points& moved) override {
     return window_ ? window_->estimate(moved) : scene_.estimate(moved);
@@ -68,8 +72,7 @@ class SceneThenWindow : public TranslationSource {
   void follow(const Eigen::Vector3d& centre, const Eigen::Vector3d& step, bool more) override {
     if (window_) {
       window_->follow(centre);
-    } else if (problem_.params.local.max_translation == 0.0 && more &&
-               step.norm() < 0.5 * problem_.margin) {
+    } else if (!bounded_ && more && step.norm() < 0.5 * problem_.margin) {
       window_ = &windows_.at(problem_, centre);  // near: go local
     }
   }
@@ -79,6 +82,7 @@ class SceneThenWindow : public TranslationSource {
 
  private:
   const Problem& problem_;
+  const bool bounded_;  // local.max_translation: the grid bounded around the start throughout
   SceneTranslation& scene_;
   WindowCache& windows_;
   TranslationWindow* window_ = nullptr;  // once the model is near
@@ -86,20 +90,24 @@ class SceneThenWindow : public TranslationSource {
 
 /// Algorithm 1 (eq. 16-17) from `pose` with the translation from `source`, and the
 /// fitness of where it ends.
-AlignResult algorithm1_with_fitness(const Problem& problem, So3Correlation& correlation,
+AlignResult algorithm1_with_fitness(const Problem& problem, const LocalParams& local,
+                                    So3Correlation& correlation,
                                     const ShCoefficients& scene_coefficients, Pose pose,
                                     TranslationSource& source, int max_iterations);
 
-/// Algorithm 1 from a hypothesis, in a window of the scene around it, on the EGI of the
-/// scene inside that window; the hypothesis itself when it is fitter.
-AlignResult refine_hypothesis(const Problem& problem, So3Correlation& scene_correlation,
+/// Algorithm 1 (`local`) from a hypothesis for refinement.refinement_iterations, in a
+/// window of the scene around it, on the EGI of the scene inside that window; the
+/// hypothesis itself when it is fitter.
+AlignResult refine_hypothesis(const Problem& problem, const RefinementParams& refinement,
+                              const LocalParams& local, So3Correlation& scene_correlation,
                               const ShCoefficients& scene_coefficients,
                               const Hypothesis& hypothesis, WindowCache& windows);
 
-/// align()'s ICP step (AlignParams::refinement.icp_refinement, or LocalParams::icp when
-/// `local`: local_icp_settings) against the whole scene, kept by the screen's fitness.
+/// align()'s ICP step (AlignParams::refinement.icp_refinement, or LocalParams::icp after
+/// the paper's mode, `after_guess`: local_icp_settings) against the whole scene, kept by
+/// the screen's fitness.
 void refine_with_icp(const Problem& problem, const PointCloud& model, const PointCloud& scene,
-                     AlignResult& result, bool local = false);
+                     AlignResult& result, bool after_guess = false);
 
 /// `a` is a better result than `b`: fitter, or as fit and better correlated.
 bool better(const AlignResult& a, const AlignResult& b);

@@ -74,7 +74,7 @@ void adopt(const Problem& problem, Prepared& prepared, const AlignAlternative& c
   best.inliers = chosen.inliers;
   best.inlier_rmse = chosen.inlier_rmse;
   const Pose pose = problem.model.pose_of(best.T_scene_model);
-  best.fitness = problem.model.fitness(problem.verifier, pose, problem.params.scene.voxel_size);
+  best.fitness = problem.model.fitness(problem.verifier, pose, problem.scale.voxel_size);
   best.correlation = prepared.correlation.evaluate(pose.R).value;
   best.translation_peak = 0.0;
   best.converged = false;
@@ -89,10 +89,11 @@ void adopt(const Problem& problem, Prepared& prepared, const AlignAlternative& c
 }  // namespace
 
 // Whether an alternative replaced the refined pose (replacement).
-bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
-              const std::optional<PartCoverage>& coverage, AlignResult& best) {
+bool reselect(const Problem& problem, const VerificationParams& verification, Prepared& prepared,
+              const PointCloud& model, const std::optional<PartCoverage>& coverage,
+              AlignResult& best) {
   const AlignAlternative* replacing =
-      replacement(best, problem.params.verification.reselect_margin, model, coverage);
+      replacement(best, verification.reselect_margin, model, coverage);
   if (!replacing) return false;
   adopt(problem, prepared, *replacing, best);
   return true;
@@ -134,17 +135,18 @@ std::optional<AlignAlternative> most_confident_resting(const PointCloud& model,
 }  // namespace
 
 // Whether a resting pose replaced one that does not rest (kRestingMargin).
-bool rest_on_support(const Problem& problem, Prepared& prepared, const PointCloud& model,
+bool rest_on_support(const Problem& problem, const VerificationParams& verification,
+                     const GlobalSearchParams& search, Prepared& prepared, const PointCloud& model,
                      const Verifier& verifier, const RestingCheck& check, AlignResult& best) {
   // Past max_seconds the returned pose stands: the search is not reopened.
-  if (problem.params.verification.reselect_margin >= 1.0 || expired(problem)) return false;
-  const double voxel = problem.params.scene.voxel_size;
+  if (verification.reselect_margin >= 1.0 || expired(problem)) return false;
+  const double voxel = problem.scale.voxel_size;
   if (check.rests(model, best.T_scene_model)) return false;
   std::vector<Transform> candidates;
   for (const AlignAlternative& alternative : best.alternatives)
     candidates.push_back(alternative.T_scene_model);
   const auto parts = object_parts(prepared.searched, prepared.plane, problem.model.reach(), voxel,
-                                  prepared.band, problem.params.search.max_parts);
+                                  prepared.band, search.max_parts);
   for (const Transform& T :
        resting_poses(problem, prepared.searched, parts, *prepared.plane, kRestingPerPart))
     candidates.push_back(T);

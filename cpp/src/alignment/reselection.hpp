@@ -14,13 +14,18 @@
 
 namespace spectral_vs::detail {
 
-/// Whether an alternative replaced the refined pose `best` (the rule of reselection.cpp).
-bool reselect(const Problem& problem, Prepared& prepared, const PointCloud& model,
-              const std::optional<PartCoverage>& coverage, AlignResult& best);
+/// Whether an alternative replaced the refined pose `best` (the rule of reselection.cpp,
+/// verification.reselect_margin).
+bool reselect(const Problem& problem, const VerificationParams& verification, Prepared& prepared,
+              const PointCloud& model, const std::optional<PartCoverage>& coverage,
+              AlignResult& best);
 
 /// Whether a resting pose replaced `best`, one that does not rest by `check` (made on
-/// prepared's support plane; kRestingMargin).
-bool rest_on_support(const Problem& problem, Prepared& prepared, const PointCloud& model,
+/// prepared's support plane; kRestingMargin): one of the alternatives, or of the model's
+/// flat faces down at each of the scene's parts (at most search.max_parts). Not with
+/// verification.reselect_margin at 1 (reselection off).
+bool rest_on_support(const Problem& problem, const VerificationParams& verification,
+                     const GlobalSearchParams& search, Prepared& prepared, const PointCloud& model,
                      const Verifier& verifier, const RestingCheck& check, AlignResult& best);
 
 }  // namespace spectral_vs::detail

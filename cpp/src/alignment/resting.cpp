@@ -161,7 +161,7 @@ bool RestingCheck::rests(const PointCloud& model, const Transform& T_scene_model
 std::vector<Transform> resting_poses(const Problem& problem, const PointCloud& scene,
                                      const std::vector<std::vector<Eigen::Index>>& parts,
                                      const SupportPlane& plane, int per_part) {
-  const double voxel = problem.params.scene.voxel_size;
+  const double voxel = problem.scale.voxel_size;
   const PointCloud model = problem.model.cloud();
   const std::vector<Eigen::Vector3d> faces = resting_faces(model, 0.5 * voxel);
   const Eigen::Index stride =

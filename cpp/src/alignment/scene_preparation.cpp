@@ -81,12 +81,12 @@ std::vector<Eigen::Index> whole_view(const PointCloud& searched) {
 }
 
 // With guess_distance: the parts of the scene that the model could reach from the guess.
-void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
+void keep_parts_near_guess(const Problem& problem, const GlobalSearchParams& search,
+                           const Transform& initial_guess, const PointCloud& searched,
                            std::vector<std::vector<Eigen::Index>>& parts) {
-  const AlignParams& params = problem.params;
-  if (!(params.search.guess_distance > 0.0)) return;
-  const Eigen::Vector3d centre = problem.model.centre(problem.model.pose_of(params.initial_guess));
-  const double reach = params.search.guess_distance + problem.model.reach();
+  if (!(search.guess_distance > 0.0)) return;
+  const Eigen::Vector3d centre = problem.model.centre(problem.model.pose_of(initial_guess));
+  const double reach = search.guess_distance + problem.model.reach();
   const auto far = [&](const std::vector<Eigen::Index>& part) {
     for (const Eigen::Index i : part)
       if ((searched.points().row(i).transpose() - centre).norm() <= reach) return false;

@@ -38,8 +38,10 @@ std::vector<std::vector<Eigen::Index>> object_parts(const PointCloud& searched,
 /// The whole of a single view as the one part (no support plane to cut it).
 std::vector<Eigen::Index> whole_view(const PointCloud& searched);
 
-/// With guess_distance: keeps the parts that the model could reach from the guess.
-void keep_parts_near_guess(const Problem& problem, const PointCloud& searched,
+/// With search.guess_distance: keeps the parts that the model could reach from
+/// `initial_guess`.
+void keep_parts_near_guess(const Problem& problem, const GlobalSearchParams& search,
+                           const Transform& initial_guess, const PointCloud& searched,
                            std::vector<std::vector<Eigen::Index>>& parts);
 
 /// The sensor origin of a single view, or none (a scene seen from all sides, declared or

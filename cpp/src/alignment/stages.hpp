@@ -20,6 +20,8 @@
 #include "alignment/scene_map.hpp"
 #include "alignment/verifier.hpp"
 
+#include <spectral_vs/translation/phase_correlation.hpp>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
@@ -48,17 +50,19 @@ class ScoredModel : public MovingModel {
   }
 };
 
-// What Algorithm 1 works with: the scene, the model, the EGI correlation it ascends,
-// and the translation grids. The paper's mode starts on the grid over the whole scene
-// and moves to a window once the translation steps fit in it.
+// What every stage works on: the scene, the model, its EGI, the scale they are measured
+// in and the translation grids' settings. A stage's own settings group is not here: each
+// stage takes the group it reads as an argument (docs/architecture.md, the stage table).
 struct Problem {
   const SceneMap& scene;
   const Verifier& verifier;  // scores poses against the whole scene (its sensor's view)
   ScoredModel& model;
   const ShCoefficients& model_coefficients;
-  const AlignParams& params;
-  double margin;
-  Clock::time_point deadline = Clock::time_point::max();    // of params.max_seconds
+  const SceneParams& scale;      // the unit of every stage: voxel, bandwidth, EGI, occupancy
+  PhaseCorrelationParams phase;  // of the translation grids: local.subvoxel, threads, limits
+  int threads;                   // of the SO(3) searches
+  double margin;                 // of a window around the model, metres
+  Clock::time_point deadline = Clock::time_point::max();    // of AlignParams::max_seconds
   std::optional<Eigen::Vector3d> flat_axis = std::nullopt;  // of the model's EGI, if it has one
   bool dense_model = true;  // at least kPolishMinDensity points per occupied voxel
   std::optional<Eigen::Vector3d> viewpoint = std::nullopt;  // the sensor of a single view
@@ -87,9 +91,9 @@ inline bool expired(const Problem& problem) { return Clock::now() > problem.dead
 /// A guess's neighbourhood (GlobalSearchParams::guess_angle_deg, guess_distance) is set.
 bool has_neighbourhood(const GlobalSearchParams& search);
 
-/// The window's margin around the model (GlobalSearchParams::window_margin, or from the
-/// voxels), metres.
-double window_margin(double search_voxel, const AlignParams& params);
+/// The window's margin around the model (search.window_margin, or from the voxels: the
+/// alignment's `voxel_size` and the search's `search_voxel`), metres.
+double window_margin(const GlobalSearchParams& search, double voxel_size, double search_voxel);
 
 /// The translation window of one alignment, made at its first use and moved to each place
 /// a stage works at (a part's placement, Algorithm 1 from a hypothesis, the sweep, the
