@@ -8,6 +8,7 @@
 #include "alignment/polish.hpp"
 #include "alignment/prepared.hpp"
 #include "alignment/refinement.hpp"
+#include "alignment/reselection.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/verdict_detail.hpp"
 #include "test_support.hpp"
@@ -265,6 +266,86 @@ TEST(Symmetries, OfABoxBeginWithItsThreeHalfTurns) {
       nearest = std::min(nearest, angle_deg(symmetries[i].transpose() * half_turn));
     EXPECT_LT(nearest, 2.0) << "the half turn about axis " << axis;
   }
+}
+
+// The alternatives on their own (find_alternatives): a box at a known pose, its four
+// equal poses the half turns. From its near-symmetries, each half turn is found within 5
+// degrees and 10 mm and scores within kAlternativeMargin of the pose; none is sought
+// when none is asked for.
+TEST(Alternatives, OfABoxAtItsPoseAreItsHalfTurns) {
+  std::mt19937 rng(8);
+  const PointCloud model = test::box(4000, rng);
+  Transform T_scene_model = Transform::Identity();
+  T_scene_model.topLeftCorner<3, 3>() = about({0.4, 1.2, -0.5}, 60.0);
+  T_scene_model.topRightCorner<3, 1>() << 0.03, -0.02, 0.01;
+  const PointCloud scene = test::box(4000, rng).transformed(T_scene_model);
+  const double voxel = 0.008;
+  const int bandwidth = 16;
+  const Verifier verifier(scene, voxel, std::nullopt);
+  AlignResult result;
+  result.T_scene_model = T_scene_model;
+  set_verification(result, verifier.verify(model, T_scene_model));
+  AlternativeSources sources;
+  sources.symmetries = model_symmetries(egi_coefficients(model, bandwidth), bandwidth, 1);
+  const VerificationParams verification;
+  find_alternatives(model, verifier, sources, verification, voxel, std::nullopt, result);
+  for (int axis = 0; axis < 3; ++axis) {
+    Transform turned = T_scene_model;
+    turned.topLeftCorner<3, 3>() *= about(Eigen::Matrix3d::Identity().col(axis), 180.0);
+    bool found = false;
+    for (const AlignAlternative& a : result.alternatives) {
+      const auto [degrees, metres] = test::pose_error(a.T_scene_model, turned, model.centroid());
+      found = found || (degrees < 5.0 && metres < 0.010);
+    }
+    EXPECT_TRUE(found) << "the half turn about axis " << axis;
+  }
+  for (const AlignAlternative& a : result.alternatives)
+    EXPECT_GE(a.confidence, result.confidence - kAlternativeMargin);
+  VerificationParams none = verification;
+  none.max_alternatives = 0;
+  find_alternatives(model, verifier, sources, none, voxel, std::nullopt, result);
+  EXPECT_TRUE(result.alternatives.empty());
+}
+
+// The reselection on its own (reselect): an alternative more confident than the pose by
+// over reselect_margin replaces it, claiming no run of Algorithm 1; one within the margin
+// and with no more inliers does not, nor any with the reselection off (margin 1).
+TEST(Reselection, AFarMoreConfidentAlternativeReplacesThePose) {
+  const MovedObject object(9);
+  Stages stages(object);
+  Transform wrong = object.T_scene_model;
+  wrong.topLeftCorner<3, 3>() *= about(Eigen::Vector3d::UnitZ(), 90.0);
+  AlignResult best;
+  best.T_scene_model = wrong;
+  best.confidence = 0.40;
+  best.inliers = 3000;
+  best.iterations = 12;
+  AlignAlternative right;
+  right.T_scene_model = object.T_scene_model;
+  right.inliers = 2000;
+  VerificationParams verification;  // reselect_margin 0.1
+  for (const double confidence : {0.45, 0.55}) {
+    AlignResult trial = best;
+    right.confidence = confidence;
+    trial.alternatives = {right};
+    const bool replaced =
+        reselect(stages.problem, verification, stages.prepared, object.model, std::nullopt, trial);
+    EXPECT_EQ(replaced, confidence > 0.40 + verification.reselect_margin) << confidence;
+    if (!replaced) {
+      EXPECT_EQ(trial.T_scene_model, wrong);
+      continue;
+    }
+    EXPECT_EQ(trial.T_scene_model, object.T_scene_model);
+    EXPECT_EQ(trial.confidence, confidence);
+    EXPECT_EQ(trial.stop_reason, AlignStopReason::reselected);
+    EXPECT_EQ(trial.iterations, 0);
+    EXPECT_EQ(trial.hypothesis, -2);
+    EXPECT_GT(trial.fitness, 0.9) << "the fitness of the pose it now holds";
+  }
+  verification.reselect_margin = 1.0;
+  best.alternatives = {right};
+  EXPECT_FALSE(
+      reselect(stages.problem, verification, stages.prepared, object.model, std::nullopt, best));
 }
 
 // The one verdict of both modes (judge_pose), on its own: the true pose of an object with

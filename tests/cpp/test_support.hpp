@@ -42,6 +42,26 @@ inline PointCloud box_and_sphere(int samples, std::mt19937& rng) {
   return PointCloud(points, normals);
 }
 
+/// Surface samples of a box (0.20 x 0.12 x 0.06 m) with distinct sides, area-weighted,
+/// with outward unit normals: its symmetries are the half turns about its axes.
+inline PointCloud box(int samples, std::mt19937& rng) {
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  const Eigen::Vector3d half(0.10, 0.06, 0.03);
+  const Eigen::Vector3d area(half.y() * half.z(), half.x() * half.z(), half.x() * half.y());
+  std::discrete_distribution<int> face{area.x(), area.y(), area.z()};
+  Points points(samples, 3), normals(samples, 3);
+  for (int i = 0; i < samples; ++i) {
+    const int axis = face(rng);
+    Eigen::Vector3d u(uniform(rng), uniform(rng), uniform(rng));
+    u[axis] = u[axis] < 0 ? -1.0 : 1.0;
+    points.row(i) = half.cwiseProduct(u).transpose();
+    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+    n[axis] = u[axis];
+    normals.row(i) = n.transpose();
+  }
+  return PointCloud(points, normals);
+}
+
 /// `cloud` with each point kept with probability `keep` and moved by Gaussian noise.
 inline PointCloud thin_and_jitter(const PointCloud& cloud, double keep, double sigma,
                                   std::mt19937& rng) {

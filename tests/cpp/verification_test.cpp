@@ -116,25 +116,6 @@ TEST(VerifyPose, BadInputNamesTheArgument) {
   EXPECT_THROW(verify_pose(PointCloud(), cloud, Transform::Identity()), std::invalid_argument);
 }
 
-// Surface samples of a box with distinct sides: its rotations are the half turns.
-PointCloud box(int samples, std::mt19937& rng) {
-  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
-  const Eigen::Vector3d half(0.10, 0.06, 0.03);
-  const Eigen::Vector3d area(half.y() * half.z(), half.x() * half.z(), half.x() * half.y());
-  std::discrete_distribution<int> face{area.x(), area.y(), area.z()};
-  Points points(samples, 3), normals(samples, 3);
-  for (int i = 0; i < samples; ++i) {
-    const int axis = face(rng);
-    Eigen::Vector3d u(uniform(rng), uniform(rng), uniform(rng));
-    u[axis] = u[axis] < 0 ? -1.0 : 1.0;
-    points.row(i) = half.cwiseProduct(u).transpose();
-    Eigen::Vector3d n = Eigen::Vector3d::Zero();
-    n[axis] = u[axis];
-    normals.row(i) = n.transpose();
-  }
-  return PointCloud(points, normals);
-}
-
 double degrees_apart(const Transform& a, const Transform& b) {
   return rotation_distance(a.topLeftCorner<3, 3>(), b.topLeftCorner<3, 3>()) * 180.0 / M_PI;
 }
@@ -218,8 +199,8 @@ TEST(StepScore, ReadingTheFieldRefusesWhatFieldShareRefuses) {
 
 TEST(AlignAlternatives, ABoxReportsItsFourHalfTurnPoses) {
   std::mt19937 rng(3);
-  const PointCloud model = box(4000, rng);
-  const PointCloud scene = box(4000, rng).transformed(true_pose());
+  const PointCloud model = test::box(4000, rng);
+  const PointCloud scene = test::box(4000, rng).transformed(true_pose());
   const AlignResult result = align(model, scene);
   // The half turns map the box onto itself: the same answer, listed but not ambiguous.
   EXPECT_FALSE(result.ambiguous);
@@ -273,10 +254,10 @@ TEST(AlignAlternatives, AnAsymmetricObjectIsNotAmbiguousAndAWrongPoseScoresLow) 
 
 TEST(AlignAlternatives, NoneAskedNoneSought) {
   std::mt19937 rng(3);
-  const PointCloud model = box(2000, rng);
+  const PointCloud model = test::box(2000, rng);
   AlignParams params;
   params.verification.max_alternatives = 0;
-  const AlignResult result = align(model, box(2000, rng).transformed(true_pose()), params);
+  const AlignResult result = align(model, test::box(2000, rng).transformed(true_pose()), params);
   EXPECT_TRUE(result.alternatives.empty());
   EXPECT_FALSE(result.ambiguous);
   params.verification.max_alternatives = 65;

@@ -392,3 +392,56 @@ def test_the_servo_scores_steps_at_the_relocalization_threshold_the_cpp_default_
     fields = {f.name: f for f in cpp_fields(Bound("alignment/verification.hpp", "StepScoreParams"))}
     cpp = float(fields["relocalize_fitness"].default)
     assert cpp == RelocalizationParams().relocalize_fitness
+
+
+# --- The stages' tuned constants (issue 35, point 6) ----------------------------------------
+
+#: A named constant: ``constexpr double kFlatAxisRatio = 0.1;``.
+TUNED_CONSTANT = re.compile(r"^\s*(?:inline\s+)?constexpr\s+[\w:]+\s+(k\w+)\s*=")
+
+
+def constant_notes(path: Path) -> dict[str, bool]:
+    """Each named constant of a file, and whether its note is there: a comment on its line,
+    or in the comment just above it or above the run of constants it stands in."""
+    lines = path.read_text().splitlines()
+    notes = {}
+    for i, line in enumerate(lines):
+        match = TUNED_CONSTANT.match(line)
+        if not match:
+            continue
+        j = i - 1
+        while j >= 0 and TUNED_CONSTANT.match(lines[j]):
+            j -= 1
+        notes[match.group(1)] = "//" in line or (j >= 0 and lines[j].strip().startswith("//"))
+    return notes
+
+
+def test_every_tuned_constant_of_the_stages_carries_its_note():
+    """Each stage's constants are named in its own file, each with its unit and the
+    measurement behind it (docs/architecture.md, "Tuned constants")."""
+    found = {}
+    for path in sorted(STAGE_SOURCES.glob("*.[ch]pp")):
+        found.update(
+            {f"{path.name}: {name}": noted for name, noted in constant_notes(path).items()}
+        )
+    assert len(found) > 80, "the constants' parse found too few"
+    bare = sorted(name for name, noted in found.items() if not noted)
+    assert not bare, f"constants without a note: {bare}"
+
+
+def test_the_constant_parser_sees_a_note_above_a_run_of_constants(tmp_path):
+    source = tmp_path / "stage.cpp"
+    source.write_text(
+        "// Two steps, degrees: measured on the tuning set.\n"
+        "constexpr double kFirst = 4.0;\n"
+        "constexpr double kLast = 0.25;\n"
+        "\n"
+        "constexpr int kBare = 3;\n"
+        "inline constexpr double kInline = 1.0;  // metres\n"
+    )
+    assert constant_notes(source) == {
+        "kFirst": True,
+        "kLast": True,
+        "kBare": False,
+        "kInline": True,
+    }

@@ -13,7 +13,7 @@ namespace {
 
 constexpr double kMaxPixels = 4194304.0;  // 2^22: a 2048 x 2048 image at most
 constexpr double kMaxSlope = 3.0;         // rays up to about 72 degrees off the axis
-constexpr float kNothing = std::numeric_limits<float>::infinity();
+constexpr float kNothing = std::numeric_limits<float>::infinity();  // a pixel seen empty
 // With Distance::along_normal, the largest depth difference of a point on the surface, in
 // tolerances: a surface at 75 degrees to the ray changes its depth by about 4 tolerances
 // across a pixel of 2 (the support check's half-voxel pixels at a quarter-voxel tolerance).

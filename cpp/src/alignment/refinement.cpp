@@ -108,12 +108,7 @@ AlignResult algorithm1_step(const Algorithm1Problem& loop, TranslationSource& so
   // The returned pose is then not where this run ended: it claims no iterations.
   result.T_scene_model = loop.model.transform_of(start);
   result.fitness = start_score;
-  result.correlation = loop.correlation.evaluate(start.R).value;
-  result.translation_peak = 0.0;
-  result.converged = false;
-  result.stop_reason = AlignStopReason::kept_start;
-  result.iterations = 0;
-  result.history.clear();
+  claim_no_run(result, loop.correlation.evaluate(start.R).value, AlignStopReason::kept_start);
   return result;
 }
 

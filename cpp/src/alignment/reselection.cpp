@@ -75,12 +75,7 @@ void adopt(const Problem& problem, Prepared& prepared, const AlignAlternative& c
   best.inlier_rmse = chosen.inlier_rmse;
   const Pose pose = problem.model.pose_of(best.T_scene_model);
   best.fitness = problem.model.fitness(problem.verifier, pose, problem.scale.voxel_size);
-  best.correlation = prepared.correlation.evaluate(pose.R).value;
-  best.translation_peak = 0.0;
-  best.converged = false;
-  best.stop_reason = AlignStopReason::reselected;
-  best.iterations = 0;
-  best.history.clear();
+  claim_no_run(best, prepared.correlation.evaluate(pose.R).value, AlignStopReason::reselected);
   best.hypothesis = -2;
   best.polish_evaluations = 0;
   best.icp_iterations = 0;

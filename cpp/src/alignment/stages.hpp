@@ -85,7 +85,19 @@ class StageTimer {
   Clock::time_point start_;
 };
 
-/// The time limit of params.max_seconds has passed.
+/// `result` now holds a pose that no run of Algorithm 1 ended at (its start kept, an
+/// alternative reselected): it claims no iterations, no history, no translation peak, is
+/// not converged, stops for `reason`, and reports the EGI `correlation` at that pose.
+inline void claim_no_run(AlignResult& result, double correlation, AlignStopReason reason) {
+  result.correlation = correlation;
+  result.translation_peak = 0.0;
+  result.converged = false;
+  result.stop_reason = reason;
+  result.iterations = 0;
+  result.history.clear();
+}
+
+/// The time limit of AlignParams::max_seconds has passed.
 inline bool expired(const Problem& problem) { return Clock::now() > problem.deadline; }
 
 /// A guess's neighbourhood (GlobalSearchParams::guess_angle_deg, guess_distance) is set.
