@@ -16,10 +16,22 @@ inline std::string data_path(const std::string& file) {
   return std::string(folder ? folder : SPECTRAL_VS_TEST_DATA) + "/" + file;
 }
 
+/// Row i of `points` and `normals`: a uniform sample of one of the two faces of a box of
+/// half sides `half` across `axis` (the side drawn at random), its outward normal.
+inline void sample_box_face(const Eigen::Vector3d& half, int axis, std::mt19937& rng,
+                            Points& points, Points& normals, Eigen::Index i) {
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  Eigen::Vector3d u(uniform(rng), uniform(rng), uniform(rng));
+  u[axis] = u[axis] < 0 ? -1.0 : 1.0;
+  points.row(i) = half.cwiseProduct(u).transpose();
+  Eigen::Vector3d n = Eigen::Vector3d::Zero();
+  n[axis] = u[axis];
+  normals.row(i) = n.transpose();
+}
+
 /// Surface samples of a box (0.24 x 0.12 x 0.08 m) with a sphere (r = 0.06 m) beside
 /// it: an asymmetric 0.25 m object with outward unit normals.
 inline PointCloud box_and_sphere(int samples, std::mt19937& rng) {
-  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   std::normal_distribution<double> gaussian(0.0, 1.0);
   Points points(samples, 3), normals(samples, 3);
   const Eigen::Vector3d half(0.12, 0.06, 0.04);
@@ -31,12 +43,7 @@ inline PointCloud box_and_sphere(int samples, std::mt19937& rng) {
       normals.row(i) = n.transpose();
     } else {
       const int axis = std::uniform_int_distribution<int>(0, 2)(rng);
-      Eigen::Vector3d u(uniform(rng), uniform(rng), uniform(rng));
-      u[axis] = u[axis] < 0 ? -1.0 : 1.0;
-      points.row(i) = half.cwiseProduct(u).transpose();
-      Eigen::Vector3d n = Eigen::Vector3d::Zero();
-      n[axis] = u[axis];
-      normals.row(i) = n.transpose();
+      sample_box_face(half, axis, rng, points, normals, i);
     }
   }
   return PointCloud(points, normals);
@@ -45,20 +52,11 @@ inline PointCloud box_and_sphere(int samples, std::mt19937& rng) {
 /// Surface samples of a box (0.20 x 0.12 x 0.06 m) with distinct sides, area-weighted,
 /// with outward unit normals: its symmetries are the half turns about its axes.
 inline PointCloud box(int samples, std::mt19937& rng) {
-  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   const Eigen::Vector3d half(0.10, 0.06, 0.03);
   const Eigen::Vector3d area(half.y() * half.z(), half.x() * half.z(), half.x() * half.y());
   std::discrete_distribution<int> face{area.x(), area.y(), area.z()};
   Points points(samples, 3), normals(samples, 3);
-  for (int i = 0; i < samples; ++i) {
-    const int axis = face(rng);
-    Eigen::Vector3d u(uniform(rng), uniform(rng), uniform(rng));
-    u[axis] = u[axis] < 0 ? -1.0 : 1.0;
-    points.row(i) = half.cwiseProduct(u).transpose();
-    Eigen::Vector3d n = Eigen::Vector3d::Zero();
-    n[axis] = u[axis];
-    normals.row(i) = n.transpose();
-  }
+  for (int i = 0; i < samples; ++i) sample_box_face(half, face(rng), rng, points, normals, i);
   return PointCloud(points, normals);
 }
 
