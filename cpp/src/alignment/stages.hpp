@@ -3,14 +3,16 @@
 // align() runs them (docs/architecture.md):
 //   scene_preparation  the support plane, the connected parts, the single-view check;
 //   hypotheses         the SO(3) search (global or per part), placement, ranking;
-//   refinement         Algorithm 1 from each hypothesis, the flat-axis sweep, the polish,
-//                      the ICP;
+//   refinement         Algorithm 1 from each hypothesis and the ICP, each kept by its rule
+//                      (refinement.hpp, both modes'); between them the flat-axis sweep
+//                      and the polish (polish.hpp);
 //   verifier           the one verification: the screen that ranks poses (fitness)
 //                      and the check behind the verdict (confidence, inliers);
 //   alternatives       the other poses the scene supports about as well;
 //   reselect           an alternative replaces the pose: one far more confident, one
 //                      that explains its object's part whole (part_coverage), or one
-//                      as confident with more inliers.
+//                      as confident with more inliers; in clutter, a resting pose;
+//   verdict            the one of both modes (judge_pose, verdict_detail.hpp).
 
 #include <spectral_vs/alignment/aligner.hpp>
 

@@ -16,7 +16,7 @@ namespace spectral_vs::detail::views {
 
 namespace {
 
-// The verdict: reference points it checks, at most (a stride over the prepared
+// The verification: reference points it checks, at most (a stride over the prepared
 // reference: the score is a share, which 8000 points measure to about 1%); hypotheses
 // refined as candidate alternatives, of those whose coarse support is at least
 // kAlternativeSupportShare of the best one's; the margin of score within which one is an
@@ -32,9 +32,9 @@ constexpr double kApartRadians = 5.0 * M_PI / 180.0;
 // Stage: verification, then the verdict. The reference (at most kVerdictPoints of it)
 // verified against the current view from its sensor; the alternatives are the
 // best-supported other hypotheses, refined by the ICP and scored alike.
-class ViewVerdict {
+class ViewVerification {
  public:
-  explicit ViewVerdict(const Views& views)
+  explicit ViewVerification(const Views& views)
       : views_(views),
         sample_(every_nth(views.reference)),
         verifier_(views.verifier),
@@ -152,7 +152,7 @@ class ViewVerdict {
 
 void judge(const Views& views, ViewAlignResult& result, const std::vector<Hypothesis>& checked,
            bool timed_out) {
-  ViewVerdict(views).judge(result, checked, timed_out);
+  ViewVerification(views).judge(result, checked, timed_out);
 }
 
 }  // namespace spectral_vs::detail::views
