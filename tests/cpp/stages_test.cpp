@@ -288,23 +288,27 @@ TEST(Alternatives, OfABoxAtItsPoseAreItsHalfTurns) {
   AlternativeSources sources;
   sources.symmetries = model_symmetries(egi_coefficients(model, bandwidth), bandwidth, 1);
   const VerificationParams verification;
-  find_alternatives(model, verifier, sources, verification, voxel, std::nullopt, result);
+  const std::vector<AlignAlternative> alternatives =
+      find_alternatives(model, verifier, sources, verification, voxel, std::nullopt, T_scene_model,
+                        result.confidence);
+  ASSERT_LE(int(alternatives.size()), verification.max_alternatives);
   for (int axis = 0; axis < 3; ++axis) {
     Transform turned = T_scene_model;
     turned.topLeftCorner<3, 3>() *= about(Eigen::Matrix3d::Identity().col(axis), 180.0);
     bool found = false;
-    for (const AlignAlternative& a : result.alternatives) {
+    for (const AlignAlternative& a : alternatives) {
       const auto [degrees, metres] = test::pose_error(a.T_scene_model, turned, model.centroid());
       found = found || (degrees < 5.0 && metres < 0.010);
     }
     EXPECT_TRUE(found) << "the half turn about axis " << axis;
   }
-  for (const AlignAlternative& a : result.alternatives)
+  for (const AlignAlternative& a : alternatives)
     EXPECT_GE(a.confidence, result.confidence - kAlternativeMargin);
   VerificationParams none = verification;
   none.max_alternatives = 0;
-  find_alternatives(model, verifier, sources, none, voxel, std::nullopt, result);
-  EXPECT_TRUE(result.alternatives.empty());
+  EXPECT_TRUE(find_alternatives(model, verifier, sources, none, voxel, std::nullopt, T_scene_model,
+                                result.confidence)
+                  .empty());
 }
 
 // The reselection on its own (reselect): an alternative more confident than the pose by

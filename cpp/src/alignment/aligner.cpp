@@ -213,21 +213,25 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
         {}};
     for (const Hypothesis& h : hypotheses)
       sources.hypotheses.push_back(moving.transform_of(h.pose));
-    find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
-                      prepared.viewpoint, best);
+    // The alternatives of the pose `best` holds now (it may change twice below).
+    const auto seek_alternatives = [&] {
+      best.alternatives =
+          find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
+                            prepared.viewpoint, best.T_scene_model, best.confidence);
+      best.ambiguous = !best.alternatives.empty();
+    };
+    seek_alternatives();
     // The parts are cut only when there is an alternative to weigh (a few percent of a
     // cluttered alignment's time otherwise).
     std::optional<PartCoverage> coverage;
     if (prepared.plane && !best.alternatives.empty())
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
     if (reselect(problem, params.verification, prepared, model, coverage, best))
-      find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
-                        prepared.viewpoint, best);
+      seek_alternatives();
     if (resting && params.verification.expect_resting &&
         rest_on_support(problem, params.verification, params.search, prepared, model, verifier,
                         *resting, best))
-      find_alternatives(model, verifier, sources, params.verification, params.scene.voxel_size,
-                        prepared.viewpoint, best);
+      seek_alternatives();
   }
   if (resting) best.rests = resting->rests(model, best.T_scene_model);
   return best;

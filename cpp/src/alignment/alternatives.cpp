@@ -209,15 +209,15 @@ std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coeffi
   return symmetries;
 }
 
-void find_alternatives(const PointCloud& model, const Verifier& verifier,
-                       const AlternativeSources& sources, const VerificationParams& verification,
-                       double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
-                       AlignResult& result) {
-  result.alternatives.clear();
-  result.ambiguous = false;
-  if (verification.max_alternatives == 0) return;
+std::vector<AlignAlternative> find_alternatives(const PointCloud& model, const Verifier& verifier,
+                                                const AlternativeSources& sources,
+                                                const VerificationParams& verification,
+                                                double voxel_size,
+                                                const std::optional<Eigen::Vector3d>& viewpoint,
+                                                const Transform& T, double confidence) {
+  std::vector<AlignAlternative> alternatives;
+  if (verification.max_alternatives == 0) return alternatives;
   const Eigen::Vector3d c = model.centroid();
-  const Transform& T = result.T_scene_model;
 
   const std::vector<Candidate> proposed = proposed_poses(T, c, sources);
 
@@ -270,19 +270,19 @@ void find_alternatives(const PointCloud& model, const Verifier& verifier,
     return a.verification.confidence > b.verification.confidence;
   });
   for (const Candidate& candidate : candidates) {
-    if (int(result.alternatives.size()) == verification.max_alternatives) break;
-    if (candidate.verification.confidence < result.confidence - kAlternativeMargin) break;
+    if (int(alternatives.size()) == verification.max_alternatives) break;
+    if (candidate.verification.confidence < confidence - kAlternativeMargin) break;
     if (!apart(candidate.T, T, c)) continue;
     if (candidate.turn && !flat_along_turn(model, verifier, candidate, T, c, *sources.flat_axis,
                                            voxel_size, viewpoint))
       continue;
     const bool distinct = std::all_of(
-        result.alternatives.begin(), result.alternatives.end(),
+        alternatives.begin(), alternatives.end(),
         [&](const AlignAlternative& kept) { return apart(candidate.T, kept.T_scene_model, c); });
     if (!distinct) continue;
-    result.alternatives.push_back(alternative_of(candidate, T, c));
+    alternatives.push_back(alternative_of(candidate, T, c));
   }
-  result.ambiguous = !result.alternatives.empty();
+  return alternatives;
 }
 
 }  // namespace spectral_vs::detail

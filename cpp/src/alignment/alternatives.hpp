@@ -26,16 +26,18 @@ struct AlternativeSources {
 std::vector<Eigen::Matrix3d> model_symmetries(const ShCoefficients& model_coefficients,
                                               int bandwidth, int threads);
 
-/// The poses apart from `result`'s (rotation over kApartDegrees or model centroid over
-/// kApartMetres) and from each other, whose confidence is within kAlternativeMargin of
-/// result.confidence, each screened on a sparse model, refined by point-to-plane ICP and
+/// The poses apart from T (rotation over kApartDegrees or model centroid over
+/// kApartMetres) and from each other, whose confidence is within kAlternativeMargin of T's
+/// `confidence`, each screened on a sparse model, refined by point-to-plane ICP and
 /// verified at the alignment's `voxel_size`; best first, at most
 /// verification.max_alternatives; the ICP sees the scene as a single view from `viewpoint`
-/// when there is one. Sets result.alternatives and result.ambiguous.
-void find_alternatives(const PointCloud& model, const Verifier& verifier,
-                       const AlternativeSources& sources, const VerificationParams& verification,
-                       double voxel_size, const std::optional<Eigen::Vector3d>& viewpoint,
-                       AlignResult& result);
+/// when there is one.
+std::vector<AlignAlternative> find_alternatives(const PointCloud& model, const Verifier& verifier,
+                                                const AlternativeSources& sources,
+                                                const VerificationParams& verification,
+                                                double voxel_size,
+                                                const std::optional<Eigen::Vector3d>& viewpoint,
+                                                const Transform& T, double confidence);
 
 /// A pose refined as the returned pose was: point-to-plane ICP with pairs within a
 /// voxel, then within kIcpFineDistance voxel (at most `max_iterations` steps each).
