@@ -81,23 +81,17 @@ def table(rows: list[dict]) -> str:
 def verdict_table(rows: list[dict]) -> str:
     """Per object, the verdict of its answers: right ones taken as reliable, and wrong ones
     taken as reliable (a confident wrong answer, which the verdict must never give)."""
-    lines = [
-        "| object | right | of them reliable | wrong | of them reliable "
-        "| the wrong ones' statuses |",
-        "|---|---|---|---|---|---|",
-    ]
+    header = ["object", "right", "of them reliable", "wrong", "of them reliable"]
+    lines = []
     for name in dict.fromkeys(r["object"] for r in rows):
-        mine = [r for r in rows if r["object"] == name]
-        right = [r for r in mine if r["success"]]
-        wrong = [r for r in mine if not r["success"]]
+        right = [r for r in rows if r["object"] == name and r["success"]]
+        wrong = [r for r in rows if r["object"] == name and not r["success"]]
         statuses = Counter(r.get("status", "-") for r in wrong)
-        lines.append(
-            f"| {name} | {len(right)} | {sum(r['reliable'] for r in right)} | {len(wrong)} | "
-            f"{sum(r['reliable'] for r in wrong)} | "
-            + (", ".join(f"{s} {n}" for s, n in sorted(statuses.items())) or "-")
-            + " |"
-        )
-    return "\n".join(lines)
+        counts = [len(right), sum(r["reliable"] for r in right)]
+        counts += [len(wrong), sum(r["reliable"] for r in wrong)]
+        listed = ", ".join(f"{s} {n}" for s, n in sorted(statuses.items())) or "-"
+        lines.append([name, *map(str, counts), listed])
+    return report_lib.markdown([*header, "the wrong ones' statuses"], lines)
 
 
 def report(results: dict) -> None:

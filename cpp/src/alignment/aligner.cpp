@@ -205,8 +205,13 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
   // Made once: the resting rule and the verdict's `rests` ask it, of the same scene cells.
   std::optional<RestingCheck> resting;
   if (prepared.plane) resting.emplace(prepared.searched, *prepared.plane, params.scene.voxel_size);
-  if (best.stop_reason != AlignStopReason::max_seconds &&
-      params.verification.max_alternatives > 0) {
+  const auto check_rest = [&] {
+    if (resting) best.rests = resting->rests(model, best.T_scene_model);
+  };
+  if (best.stop_reason == AlignStopReason::max_seconds ||
+      params.verification.max_alternatives == 0) {
+    check_rest();
+  } else {
     AlternativeSources sources{
         model_symmetries(prepared.model_coefficients, params.scene.bandwidth, params.threads),
         axis,
@@ -228,12 +233,15 @@ AlignResult align_globally(const PointCloud& model, const PointCloud& scene,
       coverage.emplace(prepared.searched, *prepared.plane, prepared.band, params.scene.voxel_size);
     if (reselect(problem, params.verification, prepared, model, coverage, best))
       seek_alternatives();
-    if (resting && params.verification.expect_resting &&
+    check_rest();
+    // A pose that does not rest gives way to a resting one, which then rests by its check.
+    if (!best.rests && params.verification.expect_resting &&
         rest_on_support(problem, params.verification, params.search, prepared, model, verifier,
-                        *resting, best))
+                        *resting, best)) {
       seek_alternatives();
+      best.rests = true;
+    }
   }
-  if (resting) best.rests = resting->rests(model, best.T_scene_model);
   return best;
 }
 

@@ -2,11 +2,10 @@
 // pose (verdict.hpp, pose_covariance; docs/trust.md).
 #include <spectral_vs/alignment/verdict.hpp>
 
+#include "alignment/normal_directions.hpp"
 #include "alignment/scale.hpp"
 #include "alignment/verdict_detail.hpp"
 #include "common/checks.hpp"
-
-#include <spectral_vs/rotation/so3.hpp>
 
 #include <Eigen/Eigenvalues>
 

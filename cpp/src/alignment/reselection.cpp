@@ -129,14 +129,13 @@ std::optional<AlignAlternative> most_confident_resting(const PointCloud& model,
 
 }  // namespace
 
-// Whether a resting pose replaced one that does not rest (kRestingMargin).
+// Whether a resting pose replaced `best`, which does not rest by `check` (kRestingMargin).
 bool rest_on_support(const Problem& problem, const VerificationParams& verification,
                      const GlobalSearchParams& search, Prepared& prepared, const PointCloud& model,
                      const Verifier& verifier, const RestingCheck& check, AlignResult& best) {
   // Past max_seconds the returned pose stands: the search is not reopened.
   if (verification.reselect_margin >= 1.0 || expired(problem)) return false;
   const double voxel = problem.scale.voxel_size;
-  if (check.rests(model, best.T_scene_model)) return false;
   std::vector<Transform> candidates;
   for (const AlignAlternative& alternative : best.alternatives)
     candidates.push_back(alternative.T_scene_model);

@@ -22,8 +22,8 @@ bool reselect(const Problem& problem, const VerificationParams& verification, Pr
 
 /// Whether a resting pose replaced `best`, one that does not rest by `check` (made on
 /// prepared's support plane; kRestingMargin): one of the alternatives, or of the model's
-/// flat faces down at each of the scene's parts (at most search.max_parts). Not with
-/// verification.reselect_margin at 1 (reselection off).
+/// flat faces down at each of the scene's parts (at most search.max_parts); the pose it
+/// adopts rests by `check`. Not with verification.reselect_margin at 1 (reselection off).
 bool rest_on_support(const Problem& problem, const VerificationParams& verification,
                      const GlobalSearchParams& search, Prepared& prepared, const PointCloud& model,
                      const Verifier& verifier, const RestingCheck& check, AlignResult& best);

@@ -2,7 +2,6 @@
 // pose's covariance from the point-to-plane fit.
 #include <spectral_vs/alignment/verdict.hpp>
 
-#include "alignment/scale.hpp"
 #include "alignment/verdict_detail.hpp"
 #include "alignment/verifier.hpp"
 #include "common/checks.hpp"
@@ -12,12 +11,8 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <cstdint>
 #include <iterator>
-#include <map>
-#include <vector>
 
 namespace spectral_vs {
 
@@ -33,7 +28,6 @@ struct Knot {
 // The calibration maps, fitted on the calibration set by benchmarks/verdict_benchmark.py
 // (isotonic regression of right against score, reduced to knots): see docs/trust.md.
 #include "alignment/calibration_maps.inc"
-#include "alignment/normal_directions.hpp"
 
 template <std::size_t N>
 double interpolate(const Knot (&map)[N], double score) {
